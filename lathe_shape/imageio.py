@@ -1,0 +1,58 @@
+"""Image files: linear EXR through the OpenEXR package, sRGB PNG previews."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import OpenEXR
+
+__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8"]
+
+
+def write_exr(
+    path: str | os.PathLike,
+    rgb: np.ndarray,
+    metadata: dict[str, object] | None = None,
+    half: bool = False,
+) -> None:
+    """Write an (H, W, 3) linear RGB image as a ZIP-compressed scanline EXR.
+
+    ``metadata`` entries (str, int, float) become EXR header attributes;
+    ``half`` stores 16-bit floats.
+    """
+    pixels = np.ascontiguousarray(np.asarray(rgb)[..., :3], dtype=np.float16 if half else np.float32)
+    header: dict[str, object] = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+    }
+    for key, value in (metadata or {}).items():
+        header[key] = value if isinstance(value, (int, float)) else str(value)
+    with OpenEXR.File(header, {"RGB": pixels}) as exr:
+        exr.write(os.fspath(path))
+
+
+def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, object]]:
+    """Read an RGB EXR written by :func:`write_exr`: (pixels float32, header)."""
+    with OpenEXR.File(os.fspath(path)) as exr:
+        header = dict(exr.header())
+        channels = exr.channels()
+        if "RGB" in channels:
+            pixels = channels["RGB"].pixels
+        else:
+            pixels = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
+    return np.asarray(pixels, dtype=np.float32), header
+
+
+def to_srgb8(rgb: np.ndarray) -> np.ndarray:
+    """Linear RGB -> 8-bit sRGB (IEC 61966-2-1 transfer curve), clipped."""
+    x = np.clip(np.nan_to_num(np.asarray(rgb, dtype=np.float64)[..., :3]), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.round(srgb * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
+    """Write a linear RGB image as an sRGB 8-bit PNG preview."""
+    import mitsuba as mi
+
+    mi.Bitmap(to_srgb8(rgb), pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))

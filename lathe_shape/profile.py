@@ -1,0 +1,412 @@
+"""Polyline profiles of solids of revolution (numpy only).
+
+A profile is a closed 2D curve in the (r, z) half plane of the shape's local
+frame: ``r >= 0`` is the distance from the axis (local +z), ``z`` the position
+along it. Revolving it about the axis gives the solid.
+
+Conventions (see ``shared/docs/method.md``):
+
+* **Closed.** A profile is closed when its last point equals its first, or
+  when both its first and its last point lie on the axis (``r = 0``); the
+  axis then closes it (that closing segment sweeps no surface).
+* **Orientation.** Either orientation is accepted on input. Internally the
+  points are stored *clockwise* in the (r right, z up) plane, so that walking
+  from ``q_i`` to ``q_(i+1)`` the solid's interior lies on the right and the
+  outward normal of a segment is its left-hand normal ``(-dz, dr)``.
+* **Canonical chain.** The stored points form a chain ``q_0 .. q_(n-1)``.
+  When ``closed_loop`` is true the chain wraps around (segment ``q_(n-1) ->
+  q_0`` exists); otherwise both chain ends lie on the axis. A loop that runs
+  along the axis for one segment is rotated into the second form.
+* **Normals.** Each segment carries a shading normal at each of its ends.
+  At a vertex the two adjacent segment normals are averaged (the paper's
+  fig. 3) unless the corner turns by more than ``crease_angle`` degrees or the
+  vertex is flagged sharp; then each segment keeps its own normal there.
+
+Sources: an inline string ``"r z, r z, ..."`` (the ``profile`` parameter) or a
+CSV file (the ``filename`` parameter) with columns ``r,z`` and an optional
+third column ``sharp`` (1 = crease at this vertex); ``#`` starts a comment and
+an optional header line names the columns.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "ProfileError",
+    "Profile",
+    "parse_profile_string",
+    "read_profile_csv",
+    "make_profile",
+]
+
+
+class ProfileError(ValueError):
+    """Invalid profile input. The message names the source and the problem."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A validated, clockwise polyline profile with crease-aware normals."""
+
+    #: (n, 2) float64 chain points (r, z), clockwise.
+    points: np.ndarray
+    #: (n,) bool, vertex flagged sharp (crease) by the user.
+    sharp: np.ndarray
+    #: True: the chain wraps around; False: both ends lie on the axis.
+    closed_loop: bool
+    #: Human-readable origin, used in error messages.
+    source: str
+    #: Crease angle in degrees used for the normals.
+    crease_angle: float
+    #: (m, 2) segment start vertex index and end vertex index into ``points``.
+    segments: np.ndarray
+    #: (m, 2) unit shading normal (nr, nz) at each segment's start.
+    normal_start: np.ndarray
+    #: (m, 2) unit shading normal (nr, nz) at each segment's end.
+    normal_end: np.ndarray
+
+    @property
+    def segment_count(self) -> int:
+        return len(self.segments)
+
+    def segment_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """Start and end points, each (m, 2), of the surface segments."""
+        return self.points[self.segments[:, 0]], self.points[self.segments[:, 1]]
+
+    def segment_normals(self) -> np.ndarray:
+        """(m, 2) geometric outward unit normals: left-hand normal (-dz, dr)."""
+        p0, p1 = self.segment_points()
+        return _left_normals(p1 - p0)
+
+    def bounds(self) -> tuple[float, float, float]:
+        """(r_max, z_min, z_max) of the profile."""
+        return (
+            float(self.points[:, 0].max()),
+            float(self.points[:, 1].min()),
+            float(self.points[:, 1].max()),
+        )
+
+
+# ---------------------------------------------------------------------------
+# Parsing
+# ---------------------------------------------------------------------------
+
+
+def parse_profile_string(
+    text: str, source: str = "parameter 'profile'"
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Parse ``"r z, r z, ..."`` (or ``"r z sharp, ..."``) into points.
+
+    Returns ``(points (n, 2), sharp (n,), labels)``; ``labels[k]`` names point
+    ``k`` in error messages.
+    """
+    items = [item.strip() for item in text.replace(";", ",").split(",")]
+    items = [item for item in items if item]
+    rows: list[list[float]] = []
+    sharp: list[bool] = []
+    labels: list[str] = []
+    for k, item in enumerate(items):
+        label = f"{source}, point {k + 1}"
+        fields = item.split()
+        if len(fields) not in (2, 3):
+            raise ProfileError(
+                f"{label}: expected 'r z' or 'r z sharp', got {item!r}"
+            )
+        rows.append([_parse_float(f, label) for f in fields[:2]])
+        sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+        labels.append(label)
+    return _as_points(rows), np.array(sharp, dtype=bool), labels
+
+
+def read_profile_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Read a profile CSV file: columns ``r,z[,sharp]``, ``#`` comments,
+    optional header. Returns ``(points, sharp, labels)`` like
+    :func:`parse_profile_string`; labels give file name and line number."""
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.readlines()
+    except OSError as e:
+        raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
+    rows: list[list[float]] = []
+    sharp: list[bool] = []
+    labels: list[str] = []
+    for number, line in enumerate(lines, start=1):
+        content = line.split("#", 1)[0].strip()
+        if not content:
+            continue
+        fields = [f.strip() for f in content.replace(";", ",").split(",")]
+        if len(fields) == 1:
+            fields = content.split()
+        label = f"{path}, line {number}"
+        if not rows and not labels and _is_header(fields):
+            continue
+        if len(fields) not in (2, 3):
+            raise ProfileError(
+                f"{label}: expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}"
+            )
+        rows.append([_parse_float(f, label) for f in fields[:2]])
+        sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+        labels.append(label)
+    return _as_points(rows), np.array(sharp, dtype=bool), labels
+
+
+def _is_header(fields: list[str]) -> bool:
+    names = [f.lower() for f in fields]
+    return names[:2] == ["r", "z"] and (len(names) == 2 or names[2:] == ["sharp"])
+
+
+def _parse_float(text: str, label: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ProfileError(f"{label}: {text!r} is not a number") from None
+
+
+def _parse_flag(text: str, label: str) -> bool:
+    if text in ("0", "1"):
+        return text == "1"
+    raise ProfileError(f"{label}: sharp flag must be 0 or 1, got {text!r}")
+
+
+def _as_points(rows: list[list[float]]) -> np.ndarray:
+    return np.array(rows, dtype=np.float64).reshape(-1, 2)
+
+
+# ---------------------------------------------------------------------------
+# Validation and canonical form
+# ---------------------------------------------------------------------------
+
+
+def make_profile(
+    points: np.ndarray,
+    sharp: np.ndarray | None = None,
+    labels: list[str] | None = None,
+    source: str = "profile",
+    crease_angle: float = 30.0,
+) -> Profile:
+    """Validate raw points and build the canonical clockwise :class:`Profile`.
+
+    Raises :class:`ProfileError` naming ``source`` (and the offending point's
+    label) for: fewer than 3 points, non-finite values, a negative radius,
+    consecutive duplicate points, an open profile, a profile enclosing no
+    area, and a self-intersecting profile.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    n_in = len(pts)
+    flags = np.zeros(n_in, dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
+    if labels is None:
+        labels = [f"{source}, point {k + 1}" for k in range(n_in)]
+    if not math.isfinite(crease_angle) or not 0.0 <= crease_angle <= 180.0:
+        raise ProfileError(
+            f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
+        )
+
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ProfileError(f"{labels[k]}: non-finite coordinate ({_fmt(pts[k])})")
+    negative = pts[:, 0] < 0.0
+    if negative.any():
+        k = int(np.argmax(negative))
+        raise ProfileError(f"{labels[k]}: negative radius r = {pts[k, 0]:g} (r must be >= 0)")
+
+    # Drop the repeated closing point of the 'last == first' form.
+    closed_loop = n_in >= 2 and bool(np.all(pts[0] == pts[-1]))
+    if closed_loop:
+        pts, flags = pts[:-1], flags[:-1]
+        flags[0] |= bool(sharp is not None and np.asarray(sharp, dtype=bool)[-1])
+    if len(pts) < 3:
+        raise ProfileError(
+            f"{source}: a profile needs at least 3 distinct points, got {len(pts)}"
+        )
+    if not closed_loop and not (pts[0, 0] == 0.0 and pts[-1, 0] == 0.0):
+        raise ProfileError(
+            f"{source}: profile is not closed: the last point ({_fmt(pts[-1])}) must "
+            f"equal the first ({_fmt(pts[0])}), or both must lie on the axis (r = 0)"
+        )
+
+    n = len(pts)
+    nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
+    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
+    if (seg_len == 0.0).any():
+        k = int(np.argmax(seg_len == 0.0))
+        k2 = (k + 1) % n
+        raise ProfileError(
+            f"{labels[k2]}: repeats the previous point ({_fmt(pts[k])}): zero-length segment"
+        )
+
+    # The polygon, closed along the axis when the chain is open.
+    area = _signed_area(pts)
+    if abs(area) <= 1e-12 * max(1.0, float(np.abs(pts).max()) ** 2):
+        raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
+    _check_simple(pts, labels, source)
+
+    # Clockwise in the (r right, z up) plane has negative shoelace area.
+    if area > 0.0:
+        order = np.arange(n)[::-1]
+        pts, flags = pts[order], flags[order]
+        labels = [labels[k] for k in order]
+        if closed_loop:
+            # Keep the first point first after reversal.
+            pts, flags = np.roll(pts, 1, axis=0), np.roll(flags, 1)
+
+    # A loop with one segment on the axis is an axis-ended chain: rotate it so
+    # that the axis segment becomes the implicit closing one.
+    if closed_loop:
+        on_axis = (pts[:, 0] == 0.0) & (np.roll(pts[:, 0], -1) == 0.0)
+        if on_axis.any():
+            k = int(np.argmax(on_axis))
+            pts, flags = np.roll(pts, -(k + 1), axis=0), np.roll(flags, -(k + 1))
+            closed_loop = False
+
+    segments = _surface_segments(pts, closed_loop)
+    n_start, n_end = _segment_end_normals(pts, flags, closed_loop, segments, crease_angle)
+    pts.setflags(write=False)
+    return Profile(
+        points=pts,
+        sharp=flags,
+        closed_loop=closed_loop,
+        source=source,
+        crease_angle=float(crease_angle),
+        segments=segments,
+        normal_start=n_start,
+        normal_end=n_end,
+    )
+
+
+def _fmt(p: np.ndarray) -> str:
+    return f"{p[0]:g}, {p[1]:g}"
+
+
+def _signed_area(pts: np.ndarray) -> float:
+    """Shoelace area of the closed polygon (positive = counter-clockwise)."""
+    r, z = pts[:, 0], pts[:, 1]
+    return 0.5 * float(np.sum(r * np.roll(z, -1) - np.roll(r, -1) * z))
+
+
+def _check_simple(pts: np.ndarray, labels: list[str], source: str) -> None:
+    """Raise if any two non-adjacent edges of the closed polygon touch."""
+    n = len(pts)
+    a, b = pts, np.roll(pts, -1, axis=0)  # edge k: a[k] -> b[k]
+    # Adjacent edges can only overlap by folding back onto each other.
+    e_in, e_out = a - np.roll(a, 1, axis=0), b - a
+    cross_in_out = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+    dot_in_out = np.einsum("ij,ij->i", e_in, e_out)
+    scale_sq = max(1.0, float(np.abs(pts).max())) ** 2
+    folds = (np.abs(cross_in_out) <= 1e-12 * scale_sq) & (dot_in_out < 0.0)
+    if folds.any():
+        k = int(np.argmax(folds))
+        raise ProfileError(
+            f"{labels[k]}: profile intersects itself: it folds back at ({_fmt(pts[k])})"
+        )
+    i, j = np.triu_indices(n, k=1)
+    adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
+    i, j = i[~adjacent], j[~adjacent]
+    if len(i) == 0:
+        return
+    scale = float(np.abs(pts).max()) or 1.0
+    eps = 1e-12 * scale * scale
+    p, r = a[i], b[i] - a[i]
+    q, s = a[j], b[j] - a[j]
+
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+    # Orientation tests: proper crossings and touching/collinear overlaps.
+    d1 = cross(r, q - p)
+    d2 = cross(r, q + s - p)
+    d3 = cross(s, p - q)
+    d4 = cross(s, p + r - q)
+    straddle = ((d1 > eps) & (d2 < -eps) | (d1 < -eps) & (d2 > eps)) & (
+        (d3 > eps) & (d4 < -eps) | (d3 < -eps) & (d4 > eps)
+    )
+
+    def on_segment(d: np.ndarray, start: np.ndarray, vec: np.ndarray, pt: np.ndarray) -> np.ndarray:
+        t = np.einsum("ij,ij->i", pt - start, vec) / np.einsum("ij,ij->i", vec, vec)
+        return (np.abs(d) <= eps) & (t >= 0.0) & (t <= 1.0)
+
+    touch = (
+        on_segment(d1, p, r, q)
+        | on_segment(d2, p, r, q + s)
+        | on_segment(d3, q, s, p)
+        | on_segment(d4, q, s, p + r)
+    )
+    hit = straddle | touch
+    if hit.any():
+        k = int(np.argmax(hit))
+        e1, e2 = int(i[k]), int(j[k])
+
+        def edge_name(e: int) -> str:
+            if e == n - 1:
+                return f"closing segment ({_fmt(a[e])}) -> ({_fmt(b[e])})"
+            return f"segment ({_fmt(a[e])}) -> ({_fmt(b[e])})"
+
+        raise ProfileError(
+            f"{source}: profile intersects itself: {edge_name(e1)} meets {edge_name(e2)}"
+        )
+
+
+def _surface_segments(pts: np.ndarray, closed_loop: bool) -> np.ndarray:
+    n = len(pts)
+    start = np.arange(n if closed_loop else n - 1)
+    end = (start + 1) % n
+    # Segments lying on the axis sweep no surface.
+    keep = ~((pts[start, 0] == 0.0) & (pts[end, 0] == 0.0))
+    return np.stack([start[keep], end[keep]], axis=1)
+
+
+def _left_normals(delta: np.ndarray) -> np.ndarray:
+    """Unit left-hand normals (-dz, dr) of 2D direction vectors (dr, dz)."""
+    n = np.stack([-delta[:, 1], delta[:, 0]], axis=1)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _segment_end_normals(
+    pts: np.ndarray,
+    sharp: np.ndarray,
+    closed_loop: bool,
+    segments: np.ndarray,
+    crease_angle: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Shading normals at both ends of every segment (paper fig. 3).
+
+    A vertex shared by two segments gets the normalised average of their
+    normals unless it is flagged sharp or the normals differ by more than
+    ``crease_angle``; then each segment keeps its own (a crease). A chain end
+    on the axis gets the axial normal ``(0, +-1)`` when its segment is within
+    ``crease_angle`` of perpendicular to the axis (a smooth cap), else the
+    segment's own normal (a cone tip).
+    """
+    seg_n = _left_normals(pts[segments[:, 1]] - pts[segments[:, 0]])
+    n_start = seg_n.copy()
+    n_end = seg_n.copy()
+    cos_crease = math.cos(math.radians(crease_angle))
+    m = len(segments)
+    for k in range(m):
+        # Segment k ends where segment k+1 starts (if that segment exists).
+        nxt = (k + 1) % m
+        shares_vertex = segments[k, 1] == segments[nxt, 0] and (closed_loop or k + 1 < m)
+        if not shares_vertex:
+            continue
+        v = segments[k, 1]
+        a, b = seg_n[k], seg_n[nxt]
+        if not sharp[v] and float(a @ b) >= cos_crease - 1e-12:
+            avg = a + b
+            length = float(np.linalg.norm(avg))
+            if length > 1e-12:
+                n_end[k] = n_start[nxt] = avg / length
+    # Ends of the surface that lie on the axis.
+    for k, end, normals in ((0, 0, n_start), (m - 1, 1, n_end)):
+        v = segments[k, end]
+        if pts[v, 0] != 0.0 or sharp[v]:
+            continue
+        axial = np.array([0.0, math.copysign(1.0, seg_n[k, 1])])
+        if seg_n[k, 1] != 0.0 and float(seg_n[k] @ axial) >= cos_crease - 1e-12:
+            normals[k] = axial
+    return n_start, n_end

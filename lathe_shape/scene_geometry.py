@@ -1,0 +1,52 @@
+"""Ray queries against a scene whose lathes are intersected exactly.
+
+Mitsuba 3.9.1's accelerator cannot call Python intersection code, so the
+exact lathes are merged with Mitsuba's own hit here: a second scene holds the
+original scene's non-lathe shape objects (the objects are shared, so BSDFs,
+area emitters and textures are the same), Mitsuba traces it, and every lathe's
+exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
+reference triangles are therefore never reported.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .shape import LatheShape
+
+__all__ = ["ExactSceneGeometry"]
+
+
+class ExactSceneGeometry:
+    """Nearest-hit and shadow-ray queries with every lathe made exact."""
+
+    def __init__(self, scene: mi.Scene) -> None:
+        self.scene = scene
+        shapes = scene.shapes()
+        self.lathes: list[LatheShape] = [s for s in shapes if isinstance(s, LatheShape)]
+        others = [s for s in shapes if not isinstance(s, LatheShape)]
+        if not self.lathes:
+            self.rest = scene
+        else:
+            description: dict[str, object] = {"type": "scene"}
+            for index, shape in enumerate(others):
+                description[f"shape_{index}"] = shape
+            self.rest = mi.load_dict(description)
+
+    def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
+        """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
+        si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        for lathe in self.lathes:
+            ray_lathe = mi.Ray3f(ray)
+            ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
+            si_lathe = lathe.ray_intersect_exact(ray_lathe, active)
+            si = dr.select(si_lathe.t < si.t, si_lathe, si)
+        return si
+
+    def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
+        """Is anything hit along ``ray`` before ``ray.maxt``?"""
+        occluded = self.rest.ray_test(ray, active)
+        for lathe in self.lathes:
+            occluded |= lathe.ray_test_exact(ray, active & ~occluded)
+        return occluded

@@ -1,0 +1,101 @@
+"""Loading scenes for the command-line tools: defines, resolution overrides,
+clear errors."""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+
+import mitsuba as mi
+
+__all__ = ["SceneError", "load_scene", "parse_defines", "parse_resolution"]
+
+
+class SceneError(RuntimeError):
+    """A scene could not be loaded; the message names the file and the cause."""
+
+
+def parse_defines(items: list[str] | None) -> dict[str, str]:
+    """``["key=value", ...]`` (the ``-D`` options) -> dict."""
+    defines: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise SceneError(f"-D expects key=value, got {item!r}")
+        defines[key.strip()] = value
+    return defines
+
+
+def parse_resolution(text: str) -> tuple[int, int]:
+    """``"WxH"`` or ``"N"`` (square) -> (width, height)."""
+    parts = text.lower().split("x")
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) == 1:
+        values = values * 2
+    if len(values) != 2 or min(values) < 1:
+        raise SceneError(f"resolution must look like 640x480 or 512, got {text!r}")
+    return values[0], values[1]
+
+
+def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
+    try:
+        root = ET.fromstring(xml_text)
+    except ET.ParseError as e:
+        raise SceneError(f"{path}: not a valid XML file ({e})") from None
+    films = root.findall(".//sensor/film")
+    if not films:
+        raise SceneError(f"{path}: no <sensor> with a <film> to set the resolution on")
+    for film in films:
+        for name, value in zip(("width", "height"), size, strict=True):
+            node = next((c for c in film if c.get("name") == name), None)
+            if node is None:
+                node = ET.SubElement(film, "integer", {"name": name})
+            node.tag = "integer"
+            node.set("value", str(value))
+    return ET.tostring(root, encoding="unicode")
+
+
+def _without_traceback(message: str) -> str:
+    """Mitsuba embeds a Python plugin's traceback in its error; keep the
+    location line and the exception's own line."""
+    head, sep, tail = message.partition("Traceback (most recent call last):")
+    if not sep:
+        return message
+    last = [line for line in tail.splitlines() if line.strip()][-1:]
+    return head.rstrip() + ("\n  " + last[0].strip() if last else "")
+
+
+def load_scene(
+    path: str | os.PathLike,
+    defines: dict[str, str] | None = None,
+    resolution: tuple[int, int] | None = None,
+) -> mi.Scene:
+    """Load a Mitsuba XML scene (after ``import lathe_shape`` registered the
+    plugins), optionally overriding the film resolution."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"scene file '{path}' not found")
+    defines = dict(defines or {})
+    try:
+        if resolution is None:
+            scene = mi.load_file(path, **defines)
+        else:
+            with open(path, encoding="utf-8") as f:
+                text = _override_film_size(f.read(), path, resolution)
+            resolver = mi.file_resolver()
+            saved = mi.FileResolver(resolver)
+            resolver.prepend(os.path.dirname(os.path.abspath(path)))
+            try:
+                scene = mi.load_string(text, **defines)
+            finally:
+                mi.set_file_resolver(saved)
+    except SceneError:
+        raise
+    except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError
+        raise SceneError(f"{path}: could not load the scene:\n{_without_traceback(str(e))}") from None
+    if not isinstance(scene, mi.Scene):
+        raise SceneError(f"{path}: the file does not describe a <scene>")
+    return scene

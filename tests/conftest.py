@@ -1,0 +1,46 @@
+"""Shared fixtures: the Mitsuba variant and random valid profiles."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+VARIANT = os.environ.get("LATHE_TEST_VARIANT", "llvm_ad_rgb")
+mi.set_variant(VARIANT)
+
+import lathe_shape  # noqa: E402,F401  (registers the plugins)
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = ROOT / "scenes"
+SCENE_FILES = sorted(SCENES.glob("*.xml"))
+
+
+def random_ring_profile(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A star-shaped closed loop around a point off the axis (a ring solid),
+    last point == first."""
+    angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, n))
+    angles += np.linspace(0.0, 1e-3, n)  # keep them distinct
+    radius = rng.uniform(0.4, 1.0, n)
+    center = np.array([1.5, rng.uniform(-1.0, 1.0)])
+    pts = center + radius[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    return np.vstack([pts, pts[:1]])
+
+
+def random_vase_profile(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A solid with both profile ends on the axis: r(z) > 0 inside."""
+    z = np.sort(rng.uniform(0.0, 3.0, n))
+    z = np.concatenate([[0.0], z + np.linspace(1e-3, 2e-3, n), [3.01]])
+    r = np.concatenate([[0.0], rng.uniform(0.2, 1.2, n), [0.0]])
+    # Sometimes make the ends flat caps (annuli), sometimes cone tips.
+    if rng.uniform() < 0.5:
+        z[1], z[-2] = z[0], z[-1]
+    return np.stack([r, z], axis=1)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(1234)
