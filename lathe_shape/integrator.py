@@ -131,9 +131,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
-            show = active
-            if dr.hint(self.hide_emitters, mode="scalar"):
-                show &= depth > 0
+            show = active & (depth > 0) if self.hide_emitters else active
             L += beta * mis_bsdf * ds.emitter.eval(si, show)
 
             active_next = active & valid & (depth + 1 < self.max_depth)

@@ -9,23 +9,29 @@
    * - ``filename``
      - string
      - Profile CSV file (columns ``r,z[,sharp]``, ``#`` comments, optional
-       header), resolved like Mitsuba's own file names (relative to the
-       scene file). Exactly one of ``filename`` and ``profile``.
+       header) or a ``.json``/``.toml`` arc profile spec (see
+       :mod:`lathe_shape.arc_profile`), resolved like Mitsuba's own file
+       names (relative to the scene file). Exactly one of ``filename`` and
+       ``profile``.
    * - ``profile``
      - string
      - Inline profile ``"r z, r z, ..."`` (a third number per point, 0 or 1,
        flags a sharp vertex).
    * - ``kind``
      - string
-     - Profile kind: ``polyline`` (default).
+     - Profile kind: ``polyline`` (default; the points are the polyline) or
+       ``bspline`` (the points are uniform cubic B-spline control points:
+       closed periodic when the last equals the first, otherwise open with
+       tripled ends, which must then lie on the axis).
    * - ``crease_angle``
      - float
      - Corners of the profile turning by more than this many degrees keep a
        sharp edge instead of smoothly interpolated normals (default: 30).
    * - ``smooth``
      - boolean
-     - Interpolate shading normals along the profile (the paper's smooth
-       shading, default: true); false renders flat cone frustums.
+     - Polylines: interpolate shading normals along the profile (the paper's
+       smooth shading, default: true); false renders flat cone frustums.
+       B-splines always use their exact normals.
    * - ``mesh_segments``
      - integer
      - Azimuthal steps of the reference tessellation that stock integrators
@@ -52,13 +58,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .profile import Profile, ProfileError, make_profile, parse_profile_string, read_profile_csv
-from .tessellate import TriangleMesh, tessellate_profile
+from .profile import ProfileError, make_profile, parse_profile_string, read_profile_csv
+from .surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_bspline_profile
 
-__all__ = ["LatheShape", "load_profile_from_properties", "register"]
-
-#: Profile kinds the ``kind`` parameter accepts.
-PROFILE_KINDS = ("polyline",)
+__all__ = ["LatheShape", "load_surface", "register"]
 
 
 def _describe(props: mi.Properties) -> str:
@@ -66,31 +69,58 @@ def _describe(props: mi.Properties) -> str:
     return f"lathe '{name}'" if name else "lathe"
 
 
-def load_profile_from_properties(props: mi.Properties) -> Profile:
-    """Read ``filename``/``profile``/``crease_angle`` and build the profile.
-
-    Raises :class:`ProfileError` naming the file or parameter on bad input.
-    """
-    who = _describe(props)
+def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray, list[str], str]:
+    """Points from ``filename`` or ``profile`` (exactly one): (points, sharp,
+    labels, source)."""
     has_file, has_inline = "filename" in props, "profile" in props
-    filename = props.get("filename", "") if has_file else ""
-    inline = props.get("profile", "") if has_inline else ""
-    crease = float(props.get("crease_angle", 30.0))
     if has_file == has_inline:
         raise ProfileError(
             f"{who}: give exactly one of the parameters 'filename' and 'profile'"
             + (" (both were given)" if has_file else "")
         )
     if has_file:
+        filename = props.get("filename")
         path = str(mi.file_resolver().resolve(filename))
         if not os.path.exists(path):
             raise ProfileError(f"{who}: parameter 'filename': profile file '{filename}' not found")
-        points, sharp, labels = read_profile_csv(path)
-        source = path
-    else:
-        source = f"{who}: parameter 'profile'"
-        points, sharp, labels = parse_profile_string(inline, source)
-    return make_profile(points, sharp, labels, source=source, crease_angle=crease)
+        if path.lower().endswith((".json", ".toml")):
+            # A profile spec (arcs + wall thickness, paper section 2.3).
+            from .arc_profile import load_profile_spec
+
+            points, sharp, labels = load_profile_spec(path)
+        else:
+            points, sharp, labels = read_profile_csv(path)
+        return points, sharp, labels, path
+    source = f"{who}: parameter 'profile'"
+    points, sharp, labels = parse_profile_string(props.get("profile"), source)
+    return points, sharp, labels, source
+
+
+def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
+    """Read the profile parameters (``filename``/``profile``, ``kind``,
+    ``crease_angle``, ``smooth``) and build the validated surface.
+
+    Raises :class:`ValueError` naming the file or parameter on bad input.
+    """
+    who = _describe(props)
+    kind = props.get("kind", "polyline")
+    crease = float(props.get("crease_angle", 30.0))
+    smooth = bool(props.get("smooth", True))
+    if kind not in SURFACE_KINDS:
+        raise ValueError(
+            f"{who}: parameter 'kind': unknown profile kind '{kind}' "
+            f"(expected one of: {', '.join(SURFACE_KINDS)})"
+        )
+    points, sharp, labels, source = _read_points(props, who)
+    if kind == "polyline":
+        profile = make_profile(points, sharp, labels, source=source, crease_angle=crease)
+        return PolylineSurface(profile, smooth)
+    if sharp.any():
+        k = int(np.argmax(sharp))
+        raise ProfileError(
+            f"{labels[k]}: sharp flags are not supported for kind 'bspline' (the curve is smooth)"
+        )
+    return BSplineSurface(make_bspline_profile(points, source))
 
 
 class LatheShape(mi.Mesh):
@@ -99,32 +129,39 @@ class LatheShape(mi.Mesh):
 
     def __init__(self, props: mi.Properties) -> None:
         who = _describe(props)
-        kind = props.get("kind", "polyline")
-        if kind not in PROFILE_KINDS:
-            raise ValueError(
-                f"{who}: parameter 'kind': unknown profile kind '{kind}' "
-                f"(expected one of: {', '.join(PROFILE_KINDS)})"
-            )
         steps = int(props.get("mesh_segments", 256))
         if steps < 3:
             raise ValueError(f"{who}: parameter 'mesh_segments' must be at least 3, got {steps}")
-        self.smooth = bool(props.get("smooth", True))
-        self.profile = load_profile_from_properties(props)
+        #: The profile kind's surface: tessellation and exact kernels.
+        self.surface = load_surface(props)
+        self.profile = self.surface.profile
+        self.smooth = self.surface.smooth
         self.flip = bool(props.get("flip_normals", False))
         to_world = props.get("to_world", mi.ScalarTransform4f())
         #: (4, 4) float64 local-to-world matrix.
         self.to_world_matrix = np.array(to_world.matrix, dtype=np.float64)
-        mesh = tessellate_profile(self.profile, steps, smooth=self.smooth)
+        #: The reference tessellation in the local frame.
+        self.local_mesh = self.surface.tessellate(steps)
 
-        super().__init__(props.id() or "lathe", len(mesh.positions), len(mesh.faces), props,
-                         has_vertex_normals=True)
-        self._set_mesh(mesh, self.to_world_matrix)
+        super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
+                         len(self.local_mesh.faces), props, has_vertex_normals=True)
+        params = mi.traverse(self)
+        for key, value in self._mesh_buffers(self.to_world_matrix).items():
+            # The buffer types differ between JIT and scalar variants.
+            params[key] = type(params[key])(value.ravel())
+        params.update()
+        self._set_transform(self.to_world_matrix)
+
+    def _set_transform(self, matrix: np.ndarray) -> None:
+        self.to_world_matrix = np.array(matrix, dtype=np.float64)
         self._to_world = mi.Transform4f(self.to_world_matrix.astype(np.float32))
         self._to_local = self._to_world.inverse()
+        # Opaque: a new transform is a new kernel input, not a recompile.
         dr.make_opaque(self._to_world, self._to_local)
-        self._kernel_data = None
 
-    def _set_mesh(self, mesh: TriangleMesh, matrix: np.ndarray) -> None:
+    def _mesh_buffers(self, matrix: np.ndarray) -> dict[str, np.ndarray]:
+        """World-space mesh buffers of the reference tessellation."""
+        mesh = self.local_mesh
         linear, offset = matrix[:3, :3], matrix[:3, 3]
         positions = mesh.positions @ linear.T + offset
         normals = mesh.normals @ np.linalg.inv(linear)  # inverse transpose
@@ -133,68 +170,67 @@ class LatheShape(mi.Mesh):
         if np.linalg.det(linear) < 0.0:
             # A mirroring transform flips the winding; keep faces outward.
             faces = faces[:, ::-1]
-        params = mi.traverse(self)
-        buffers = {
+        return {
             "vertex_positions": positions.astype(np.float32),
             "vertex_normals": normals.astype(np.float32),
             "faces": np.ascontiguousarray(faces, dtype=np.uint32),
         }
-        for key, value in buffers.items():
-            # The buffer types differ between JIT and scalar variants.
-            params[key] = type(params[key])(value.ravel())
+
+    def set_to_world(self, matrix: np.ndarray | mi.ScalarTransform4f, scene: mi.Scene | None = None) -> None:
+        """Move the lathe: new local-to-world transform (4x4 matrix or
+        ``mi.ScalarTransform4f``).
+
+        Updates the exact intersection and the reference mesh. Pass the scene
+        holding the lathe so Mitsuba rebuilds its acceleration structure (the
+        reference mesh is then updated through ``mi.traverse(scene)``).
+        """
+        if isinstance(matrix, (mi.ScalarTransform4f, mi.ScalarTransform4d)):
+            matrix = np.array(matrix.matrix, dtype=np.float64)
+        matrix = np.asarray(matrix, dtype=np.float64)
+        if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+            raise ValueError(f"lathe '{self.id()}': set_to_world needs a finite 4x4 matrix")
+        buffers = self._mesh_buffers(matrix)
+        if scene is not None:
+            params, prefix = mi.traverse(scene), f"{self.id()}."
+            if prefix + "vertex_positions" not in params:
+                raise ValueError(f"lathe '{self.id()}' is not part of the given scene")
+        else:
+            params, prefix = mi.traverse(self), ""
+        for key in ("vertex_positions", "vertex_normals"):
+            params[prefix + key] = type(params[prefix + key])(buffers[key].ravel())
         params.update()
+        self._set_transform(matrix)
 
     # -- exact intersection -------------------------------------------------
-
-    @property
-    def kernel_data(self):
-        """Packed, opaque segment buffers for the intersection kernel (built
-        on first use)."""
-        if self._kernel_data is None:
-            from .kernels.polyline import build_polyline_data
-
-            p0, p1 = self.profile.segment_points()
-            n0, n1 = self.profile.normal_start, self.profile.normal_end
-            if not self.smooth:
-                n0 = n1 = self.profile.segment_normals()
-            self._kernel_data = build_polyline_data(
-                p0[:, 0], p0[:, 1], p1[:, 0], p1[:, 1],
-                n0[:, 0], n0[:, 1], n1[:, 0], n1[:, 1],
-            )
-        return self._kernel_data
 
     def ray_intersect_exact(self, ray: mi.Ray3f, active: mi.Bool = True) -> mi.SurfaceInteraction3f:
         """Intersect a world-space ray with the exact lathe.
 
         Returns a full :class:`mitsuba.SurfaceInteraction3f`: ``t`` (inf on a
         miss), ``p``, geometric ``n``, ``sh_frame`` from the interpolated
-        normal (the geometric one when ``smooth`` is false), ``uv`` (azimuth
-        / 2 pi, profile arclength fraction), ``dp_du``, ``dp_dv``,
-        ``prim_index`` (profile segment), ``shape`` (this lathe) and ``wi``.
+        normal (the geometric one when ``smooth`` is false or the profile is
+        a B-spline), ``uv`` (azimuth / 2 pi, position along the profile),
+        ``dp_du``, ``dp_dv``, ``prim_index`` (profile segment), ``shape``
+        (this lathe) and ``wi``.
         """
-        from .kernels.polyline import intersect_polyline
-
         active = mi.Bool(active)
+        # The local ray keeps the world ray's parameterisation: t is shared.
         o = self._to_local @ ray.o
         d = self._to_local @ ray.d
-        hit = intersect_polyline(self.kernel_data, o, d, mi.Float(ray.maxt), active)
+        hit = self.surface.intersect(o, d, mi.Float(ray.maxt), active)
         return self._interaction(ray, o, d, hit)
 
     def ray_test_exact(self, ray: mi.Ray3f, active: mi.Bool = True) -> mi.Bool:
         """Shadow-ray test: does the world-space ray hit the lathe before
         ``ray.maxt``?"""
-        from .kernels.polyline import occluded_polyline
-
         o = self._to_local @ ray.o
         d = self._to_local @ ray.d
-        return occluded_polyline(self.kernel_data, o, d, mi.Float(ray.maxt), mi.Bool(active))
+        return self.surface.occluded(o, d, mi.Float(ray.maxt), mi.Bool(active))
 
     def _interaction(self, ray: mi.Ray3f, o: mi.Point3f, d: mi.Vector3f, hit) -> mi.SurfaceInteraction3f:
-        from .kernels.polyline import polyline_geometry
-
         valid = hit.valid
         t = dr.select(valid, hit.t, 0.0)
-        geo = polyline_geometry(self.kernel_data, o + t * d, hit.seg, hit.u, self.smooth)
+        geo = self.surface.geometry(o + t * d, hit.seg, hit.u)
         n = dr.normalize(self._to_world @ mi.Normal3f(geo.n))
         sh_n = dr.normalize(self._to_world @ mi.Normal3f(geo.sh_n))
         if self.flip:
@@ -218,7 +254,7 @@ class LatheShape(mi.Mesh):
     def to_string(self) -> str:
         r_max, z_min, z_max = self.profile.bounds()
         return (
-            f"LatheShape[id='{self.id()}', source='{self.profile.source}', "
+            f"LatheShape[id='{self.id()}', kind='{self.surface.kind}', source='{self.profile.source}', "
             f"segments={self.profile.segment_count}, r_max={r_max:g}, "
             f"z=[{z_min:g}, {z_max:g}], smooth={self.smooth}]"
         )

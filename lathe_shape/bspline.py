@@ -1,0 +1,447 @@
+"""Uniform cubic B-spline profiles (method.md, Method 2), numpy only.
+
+A profile lives in the (r, z) half plane: ``r >= 0`` is the distance from the
+lathe's local +z axis, ``z`` the position along it. The curve is a uniform
+cubic B-spline of the control points ``P_0 .. P_(m-1)``; segment ``i`` uses
+``P_i .. P_(i+3)`` and, for ``t`` in [0, 1], is (method.md eqs. 13-14)
+
+    B_i(t) = ((1-t)^3 P_i + (3t^3 - 6t^2 + 4) P_(i+1)
+              + (-3t^3 + 3t^2 + 3t + 1) P_(i+2) + t^3 P_(i+3)) / 6.
+
+Two forms, chosen by the points themselves:
+
+* **closed** (first point == last point): a periodic B-spline. The repeated
+  point counts once, and the ``n >= 3`` distinct control points give ``n``
+  segments that wrap around (``P_(n+k) = P_k``).
+* **open** (first point != last point): the end control points are tripled,
+  so the curve starts exactly on the first point and ends exactly on the last
+  one (``m + 1`` segments for ``m >= 3`` points). Both ends must lie on the
+  axis (``r = 0``), so that the curve and the axis bound the solid.
+
+``bspline_segments`` returns the per-segment control points (after closing or
+tripling), which is what every other function here (and the Dr.Jit kernel in
+:mod:`lathe_shape.kernels.bspline`) takes. Orientation: like polyline
+profiles (method.md, "The object"), the kernels expect the curve to run
+clockwise in the (r right, z up) plane, interior on the right; use
+:func:`orient_clockwise` on the control points first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "BSplineError",
+    "bspline_segments",
+    "is_closed",
+    "power_coefficients",
+    "evaluate",
+    "derivative",
+    "signed_area",
+    "orientation_sign",
+    "orient_clockwise",
+    "sample_adaptive",
+    "to_polyline",
+]
+
+#: Power-basis matrix of the uniform cubic B-spline: ``C = M @ P`` gives the
+#: coefficients of ``1, t, t^2, t^3`` (rows) from the 4 control points (cols).
+_BASIS = np.array([[1.0, 4.0, 1.0, 0.0],
+                   [-3.0, 0.0, 3.0, 0.0],
+                   [3.0, -6.0, 3.0, 0.0],
+                   [-1.0, 3.0, -3.0, 1.0]]) / 6.0
+
+#: Samples per segment for the self-intersection and regularity checks.
+_CHECK_SAMPLES = 48
+
+
+class BSplineError(ValueError):
+    """An invalid B-spline profile; the message names the source and the problem."""
+
+
+# ---------------------------------------------------------------------------
+# Construction and validation
+# ---------------------------------------------------------------------------
+
+def is_closed(points: np.ndarray) -> bool:
+    """True when the control points describe a closed (periodic) B-spline,
+    i.e. when the first point equals the last one."""
+    p = np.asarray(points, dtype=np.float64)
+    return len(p) >= 2 and bool(np.array_equal(p[0], p[-1]))
+
+
+def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
+    """Per-segment control points of a validated cubic B-spline profile.
+
+    Parameter ``points`` (array of shape (m, 2)):
+        Control points ``(r, z)``. Closed when ``points[0] == points[-1]``
+        (needs >= 3 distinct points, i.e. >= 4 rows with the repeat), open
+        otherwise (needs >= 3 points, the first and last on the axis).
+
+    Parameter ``source`` (str):
+        Name of the file or scene parameter, used in error messages.
+
+    Returns an array of shape (n_seg, 4, 2): the control points of every
+    segment after closing (closed form) or tripling the ends (open form).
+
+    Raises :class:`BSplineError` when the points are not finite, too few, the
+    open ends are not on the axis, the curve crosses or touches the axis
+    (r < 0 anywhere, r = 0 other than at the open ends), has a cusp (zero
+    tangent), encloses no area, or intersects itself.
+    """
+    try:
+        p = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise BSplineError(f"{source}: B-spline control points are not numbers ({e})") from None
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise BSplineError(f"{source}: B-spline control points must be (r, z) pairs, "
+                           f"got an array of shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        bad = int(np.argwhere(~np.all(np.isfinite(p), axis=1))[0, 0])
+        raise BSplineError(f"{source}: B-spline control point {bad} is not finite: "
+                           f"{p[bad].tolist()}")
+
+    closed = is_closed(p)
+    if closed:
+        q = p[:-1]
+        n_distinct = len(np.unique(q, axis=0))
+        if n_distinct < 3:
+            raise BSplineError(f"{source}: a closed B-spline needs at least 3 distinct control "
+                               f"points (plus the repeated first one), got {n_distinct}")
+        idx = (np.arange(len(q))[:, None] + np.arange(4)[None, :]) % len(q)
+        seg = q[idx]
+    else:
+        if len(p) < 3:
+            raise BSplineError(f"{source}: an open B-spline needs at least 3 control points "
+                               f"(both ends on the axis), got {len(p)}")
+        scale = _scale(p)
+        for name, k in (("first", 0), ("last", len(p) - 1)):
+            if abs(p[k, 0]) > 1e-12 * scale:
+                raise BSplineError(
+                    f"{source}: an open B-spline must start and end on the axis (r = 0); its "
+                    f"{name} control point is {p[k].tolist()} (close it by repeating the first "
+                    f"point at the end, or move the end to r = 0)")
+        p = p.copy()
+        p[0, 0] = p[-1, 0] = 0.0
+        q = np.concatenate([p[:1], p[:1], p, p[-1:], p[-1:]])
+        idx = np.arange(len(q) - 3)[:, None] + np.arange(4)[None, :]
+        seg = q[idx]
+
+    _validate_curve(seg, closed, source)
+    return seg
+
+
+def _scale(p: np.ndarray) -> float:
+    """Size of a point set (bounding-box diagonal, 1 when degenerate)."""
+    ext = float(np.linalg.norm(p.reshape(-1, 2).max(axis=0) - p.reshape(-1, 2).min(axis=0)))
+    return ext if ext > 0 else 1.0
+
+
+def _segments_closed(seg_ctrl: np.ndarray) -> bool:
+    """Whether the curve's end equals its start (closed form)."""
+    end = seg_ctrl[-1].T @ _BASIS.sum(axis=0)
+    start = seg_ctrl[0].T @ _BASIS[0]
+    return bool(np.allclose(end, start, rtol=0, atol=1e-12 * _scale(seg_ctrl)))
+
+
+def _validate_curve(seg: np.ndarray, closed: bool, source: str) -> None:
+    """Geometric checks of :func:`bspline_segments` (see there)."""
+    n_seg = len(seg)
+    scale = _scale(seg)
+    coef = power_coefficients(seg)
+
+    # Exact minimum of R(t) per segment: at t = 0, 1 or a root of R'(t).
+    # The ends of an open curve lie on the axis and are left out (with a
+    # small margin for R'(t) roots: near the ends R(t) grows like t^3).
+    tol = 1e-9 * scale
+    for i in range(n_seg):
+        c = coef[i, 0]
+        first_open = not closed and i == 0
+        last_open = not closed and i == n_seg - 1
+        ts = ([] if first_open else [0.0]) + ([] if last_open else [1.0])
+        if np.any(c[1:] != 0):
+            for root in np.roots([3 * c[3], 2 * c[2], c[1]]):
+                lo = 1e-6 if first_open else 0.0
+                hi = 1.0 - 1e-6 if last_open else 1.0
+                if abs(root.imag) < 1e-12 and lo < root.real < hi:
+                    ts.append(float(root.real))
+        if not ts:
+            continue
+        ts = np.array(ts)
+        r = np.polynomial.polynomial.polyval(ts, c)
+        k = int(np.argmin(r))
+        if r[k] < -tol:
+            raise BSplineError(f"{source}: B-spline curve crosses the axis (r < 0) near "
+                               f"t={i + ts[k]:.4g} (segment {i}, r = {r[k]:.4g})")
+        if r[k] <= tol:
+            raise BSplineError(f"{source}: B-spline curve touches the axis (r = 0) near "
+                               f"t={i + ts[k]:.4g} (segment {i}); only the ends of an open "
+                               f"curve may lie on the axis")
+
+    # Regularity: the tangent may vanish only at the ends of an open curve
+    # (tripled control points); elsewhere a zero tangent is a cusp.
+    t = np.linspace(0.0, 1.0, _CHECK_SAMPLES + 1)
+    dr, dz = derivative(seg, np.repeat(np.arange(n_seg), len(t)), np.tile(t, n_seg))
+    speed = np.hypot(dr, dz).reshape(n_seg, len(t))
+    ends = np.zeros_like(speed, dtype=bool)
+    if not closed:
+        ends[0, :2] = True
+        ends[-1, -2:] = True
+    slow = (speed <= 1e-9 * scale) & ~ends
+    if np.any(slow):
+        i, j = np.argwhere(slow)[0]
+        raise BSplineError(f"{source}: B-spline curve has a cusp (zero tangent) near "
+                           f"t={i + t[j]:.4g}; avoid tripled interior control points")
+
+    area = signed_area(seg)
+    if abs(area) <= 1e-12 * scale * scale:
+        raise BSplineError(f"{source}: B-spline curve encloses no area")
+
+    _check_self_intersection(seg, closed, source)
+
+
+def _check_self_intersection(seg: np.ndarray, closed: bool, source: str) -> None:
+    """Dense-sampling segment-segment test for a self-intersecting curve."""
+    n_seg = len(seg)
+    t = np.linspace(0.0, 1.0, _CHECK_SAMPLES + 1)[:-1]
+    si = np.repeat(np.arange(n_seg), len(t))
+    ti = np.tile(t, n_seg)
+    r, z = evaluate(seg, si, ti)
+    pts = np.stack([r, z], axis=1)
+    param = si + ti
+    if closed:
+        pts = np.concatenate([pts, pts[:1]])
+        param = np.append(param, float(n_seg))
+    else:
+        end = np.array(evaluate(seg, n_seg - 1, 1.0)).reshape(1, 2)
+        pts = np.concatenate([pts, end])
+        param = np.append(param, float(n_seg))
+    a, b = pts[:-1], pts[1:]
+    n = len(a)
+    lo = np.minimum(a, b)
+    hi = np.maximum(a, b)
+    chunk = max(1, 4_000_000 // max(n, 1))
+    for i0 in range(0, n, chunk):
+        i = np.arange(i0, min(n, i0 + chunk))[:, None]
+        j = np.arange(n)[None, :]
+        # Only pairs that do not share an endpoint (the wrap pair of a closed
+        # curve shares one too).
+        cand = j > i + 1
+        if closed:
+            cand &= ~((i == 0) & (j == n - 1))
+        cand &= np.all(lo[j] <= hi[i], axis=2) & np.all(lo[i] <= hi[j], axis=2)
+        ii, jj = np.nonzero(cand)
+        if ii.size == 0:
+            continue
+        ii = ii + i0
+        p, pr = a[ii], b[ii] - a[ii]
+        q, qs = a[jj], b[jj] - a[jj]
+        den = pr[:, 0] * qs[:, 1] - pr[:, 1] * qs[:, 0]
+        qp = q - p
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = (qp[:, 0] * qs[:, 1] - qp[:, 1] * qs[:, 0]) / den
+            v = (qp[:, 0] * pr[:, 1] - qp[:, 1] * pr[:, 0]) / den
+        hit = (den != 0) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+        if np.any(hit):
+            k = int(np.argmax(hit))
+            t1 = param[ii[k]] + u[k] * (param[ii[k] + 1] - param[ii[k]])
+            t2 = param[jj[k]] + v[k] * (param[jj[k] + 1] - param[jj[k]])
+            raise BSplineError(f"{source}: B-spline curve intersects itself near t={t1:.4g} "
+                               f"and t={t2:.4g} (point {(p[k] + u[k] * pr[k]).round(6).tolist()})")
+
+
+# ---------------------------------------------------------------------------
+# Evaluation
+# ---------------------------------------------------------------------------
+
+def power_coefficients(seg_ctrl: np.ndarray) -> np.ndarray:
+    """Power-basis coefficients of every segment.
+
+    Returns an array of shape (n_seg, 2, 4): ``[i, 0, k]`` is the coefficient
+    of ``t^k`` in ``R_i(t)`` and ``[i, 1, k]`` the one in ``Z_i(t)``
+    (ascending powers, ``k = 0..3``), so that
+    ``R_i(t) = c[i,0,0] + c[i,0,1] t + c[i,0,2] t^2 + c[i,0,3] t^3``.
+    """
+    seg = np.asarray(seg_ctrl, dtype=np.float64)
+    return np.einsum("kj,ijc->ick", _BASIS, seg)
+
+
+def evaluate(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
+    """Curve point ``(R(t), Z(t))`` of segment(s) ``seg_index`` at ``t``
+    (both broadcast; eqs. 13-14)."""
+    c = power_coefficients(seg_ctrl)[np.asarray(seg_index)]
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    powers = np.concatenate([np.ones_like(t), t, t * t, t * t * t], axis=-1)
+    r = np.sum(c[..., 0, :] * powers, axis=-1)
+    z = np.sum(c[..., 1, :] * powers, axis=-1)
+    return r, z
+
+
+def derivative(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent ``(dR/dt, dZ/dt)`` of segment(s) ``seg_index`` at ``t``."""
+    c = power_coefficients(seg_ctrl)[np.asarray(seg_index)]
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    powers = np.concatenate([np.zeros_like(t), np.ones_like(t), 2 * t, 3 * t * t], axis=-1)
+    return np.sum(c[..., 0, :] * powers, axis=-1), np.sum(c[..., 1, :] * powers, axis=-1)
+
+
+def signed_area(seg_ctrl: np.ndarray) -> float:
+    """Exact signed area enclosed by the curve (closed along the axis for an
+    open curve), positive when counter-clockwise in the (r right, z up) plane.
+
+    Green's theorem: ``A = 1/2 sum_i int_0^1 (R Z' - Z R') dt``; the closing
+    piece along the axis has ``R = R' = 0`` and adds nothing.
+    """
+    P = np.polynomial.polynomial
+    total = 0.0
+    for c in power_coefficients(seg_ctrl):
+        r, z = c[0], c[1]
+        integrand = P.polysub(P.polymul(r, P.polyder(z)), P.polymul(z, P.polyder(r)))
+        anti = P.polyint(integrand)
+        total += P.polyval(1.0, anti)
+    return 0.5 * total
+
+
+def orientation_sign(seg_ctrl: np.ndarray) -> int:
+    """+1 when the curve runs clockwise in the (r right, z up) plane (solid
+    interior on the right when walking forward, as the kernels expect),
+    -1 otherwise."""
+    return 1 if signed_area(seg_ctrl) < 0 else -1
+
+
+def orient_clockwise(points: np.ndarray, source: str = "profile") -> np.ndarray:
+    """Control points, reversed when needed so that the curve is clockwise.
+
+    Reversing the control points of a uniform B-spline reverses the curve
+    (the basis is symmetric under ``t -> 1 - t``), for both forms.
+    """
+    p = np.array(points, dtype=np.float64)
+    seg = bspline_segments(p, source)
+    return p if orientation_sign(seg) > 0 else p[::-1].copy()
+
+
+# ---------------------------------------------------------------------------
+# Sampling
+# ---------------------------------------------------------------------------
+
+def _tangent_dir(seg_ctrl: np.ndarray, i: int, t: float) -> np.ndarray:
+    """Unit tangent; at the zero-speed ends of an open curve the limit
+    direction (along the segment's chord) is used."""
+    dr, dz = derivative(seg_ctrl, i, t)
+    v = np.array([float(dr), float(dz)])
+    n = np.linalg.norm(v)
+    if n <= 1e-9 * _scale(seg_ctrl):
+        r0, z0 = evaluate(seg_ctrl, i, 0.0)
+        r1, z1 = evaluate(seg_ctrl, i, 1.0)
+        v = np.array([float(r1 - r0), float(z1 - z0)])
+        n = np.linalg.norm(v)
+    return v / n if n > 0 else v
+
+
+def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
+                    max_error: float | None = None,
+                    max_depth: int = 16) -> list[tuple[int, float]]:
+    """Adaptive parameter samples for a reference tessellation.
+
+    Every segment's interval [0, 1] is bisected recursively until, on each
+    piece, the tangent turns by at most ``max_angle_deg`` and the curve
+    strays from the chord by at most ``max_error`` (default: 1e-4 of the
+    profile's bounding-box diagonal; checked at the quarter points).
+
+    Returns a list of ``(segment, t)`` in curve order, always holding every
+    segment's ``t = 0`` and the curve's end ``(n_seg - 1, 1.0)`` (for a closed
+    curve that end is the start point again).
+    """
+    seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
+    if max_error is None:
+        max_error = 1e-4 * _scale(seg_ctrl)
+    cos_max = math.cos(math.radians(max_angle_deg))
+
+    def point(i: int, t: float) -> np.ndarray:
+        r, z = evaluate(seg_ctrl, i, t)
+        return np.array([float(r), float(z)])
+
+    def flat(i: int, t0: float, t1: float) -> bool:
+        if float(np.dot(_tangent_dir(seg_ctrl, i, t0), _tangent_dir(seg_ctrl, i, t1))) < cos_max:
+            return False
+        a, b = point(i, t0), point(i, t1)
+        ab = b - a
+        L = np.linalg.norm(ab)
+        for f in (0.25, 0.5, 0.75):
+            m = point(i, t0 + f * (t1 - t0)) - a
+            d = abs(ab[0] * m[1] - ab[1] * m[0]) / L if L > 0 else np.linalg.norm(m)
+            if d > max_error:
+                return False
+        return True
+
+    out: list[tuple[int, float]] = []
+    for i in range(len(seg_ctrl)):
+        stack = [(0.0, 1.0, 0)]
+        while stack:  # depth-first, left piece first: keeps curve order
+            t0, t1, depth = stack.pop()
+            if depth < max_depth and not flat(i, t0, t1):
+                tm = 0.5 * (t0 + t1)
+                stack.append((tm, t1, depth + 1))
+                stack.append((t0, tm, depth + 1))
+            else:
+                out.append((i, t0))
+    out.append((len(seg_ctrl) - 1, 1.0))
+    return out
+
+
+def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") -> np.ndarray:
+    """Polyline approximation of the curve with ``n_points`` points.
+
+    Parameter ``method``:
+        ``"uniform"``: uniform in the global parameter ``T = seg + t``.
+        ``"adaptive"``: points placed at equal steps of the turning angle
+        (method.md section 2.3: keep the angle between successive segments
+        small and nearly constant), blended with 10% arc length so straight
+        stretches still get points.
+
+    Returns an (n_points, 2) array of ``(r, z)`` points on the curve. A
+    closed curve gives a closed polyline (last point == first point); an open
+    one starts and ends on the axis (r = 0 exactly).
+    """
+    seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
+    n_seg = len(seg_ctrl)
+    closed = _segments_closed(seg_ctrl)
+    n_min = 4 if closed else 3
+    if n_points < n_min:
+        raise BSplineError(f"to_polyline: need at least {n_min} points, got {n_points}")
+    if method == "uniform":
+        T = np.linspace(0.0, n_seg, n_points)
+    elif method == "adaptive":
+        # Dense sampling, cumulative turning angle + arc length, inverted.
+        dense = np.linspace(0.0, n_seg, 256 * n_seg + 1)
+        pts = _eval_global(seg_ctrl, dense)
+        chord = np.diff(pts, axis=0)
+        length = np.hypot(chord[:, 0], chord[:, 1])
+        ang = np.arctan2(chord[:, 1], chord[:, 0])
+        turn = np.abs(np.angle(np.exp(1j * np.diff(ang))))
+        turn = np.concatenate([[0.0], turn])  # turn at the start of each chord
+        total_turn, total_len = turn.sum(), length.sum()
+        w = 0.1 * total_turn / total_len if total_turn > 0 else 1.0
+        measure = np.concatenate([[0.0], np.cumsum(0.5 * (turn + np.append(turn[1:], 0.0))
+                                                   + w * length)])
+        target = np.linspace(0.0, measure[-1], n_points)
+        T = np.interp(target, measure, dense)
+    else:
+        raise BSplineError(f"to_polyline: unknown method {method!r} (use 'uniform' or 'adaptive')")
+    T[0], T[-1] = 0.0, float(n_seg)
+    pts = _eval_global(seg_ctrl, T)
+    if closed:
+        pts[-1] = pts[0]
+    else:
+        pts[0, 0] = pts[-1, 0] = 0.0
+    return pts
+
+
+def _eval_global(seg_ctrl: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Points at global parameters ``T = seg + t`` in [0, n_seg]."""
+    n_seg = len(seg_ctrl)
+    i = np.minimum(np.floor(T).astype(np.int64), n_seg - 1)
+    r, z = evaluate(seg_ctrl, i, T - i)
+    return np.stack([r, z], axis=1)

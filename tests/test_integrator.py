@@ -1,0 +1,182 @@
+"""``lathe_path``: exact lathes merged into Mitsuba's pipeline."""
+
+from __future__ import annotations
+
+import re
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+from conftest import SCENES
+
+from lathe_shape.furnace import furnace_scene, glass_mask, run_furnace
+from lathe_shape.integrator import LathePathIntegrator
+from lathe_shape.scene_geometry import ExactSceneGeometry
+from lathe_shape.shape import LatheShape
+
+
+def camera_rays(scene: mi.Scene) -> tuple[mi.Ray3f, tuple[int, int]]:
+    sensor = scene.sensors()[0]
+    width, height = sensor.film().size()
+    idx = dr.arange(mi.UInt32, width * height)
+    pos = mi.Point2f(mi.Float(idx % width) + 0.5, mi.Float(idx // width) + 0.5)
+    ray, _ = sensor.sample_ray(0.0, 0.5, pos / mi.ScalarVector2f(width, height), mi.Point2f(0.5))
+    return mi.Ray3f(ray), (height, width)
+
+
+def load_scene(name: str, **defines: str) -> mi.Scene:
+    params = {"spp": "16", "res": "64", "max_depth": "12", "mesh_segments": "2048"}
+    params.update(defines)
+    return mi.load_file(str(SCENES / f"{name}.xml"), **params)
+
+
+@pytest.mark.parametrize("name", ["wine_glass", "brandy_bottle"])
+def test_exact_hits_agree_with_fine_mesh(name):
+    scene = load_scene(name, res="96", mesh_segments="4096")
+    lathe = next(s for s in scene.shapes() if isinstance(s, LatheShape))
+    ray, _ = camera_rays(scene)
+    exact = lathe.ray_intersect_exact(ray)
+    mesh = scene.ray_intersect(ray)
+    on_mesh = mesh.is_valid() & (mesh.shape == mi.ShapePtr(lathe))
+    hit_exact, hit_mesh = exact.is_valid().numpy(), on_mesh.numpy()
+    # Hit/miss agree except along silhouettes.
+    assert (hit_exact != hit_mesh).mean() < 0.003
+    both = hit_exact & hit_mesh
+    t_e, t_m = exact.t.numpy()[both], mesh.t.numpy()[both]
+    assert np.median(np.abs(t_e - t_m) / t_m) < 1e-4
+    n_e = np.stack([c.numpy() for c in exact.sh_frame.n], axis=1)[both]
+    n_m = np.stack([c.numpy() for c in mesh.sh_frame.n], axis=1)[both]
+    assert np.median(np.einsum("ij,ij->i", n_e, n_m)) > 0.9999
+    # World-space fields are consistent.
+    p_e = np.stack([c.numpy() for c in exact.p], axis=1)[both]
+    p_m = np.stack([c.numpy() for c in mesh.p], axis=1)[both]
+    assert np.median(np.linalg.norm(p_e - p_m, axis=1)) < 1e-3
+    assert (exact.prim_index.numpy()[hit_exact] < lathe.profile.segment_count).all()
+
+
+def test_scene_geometry_never_reports_lathe_triangles():
+    scene = load_scene("wine_glass")
+    geometry = ExactSceneGeometry(scene)
+    assert geometry.lathes and all(not isinstance(s, LatheShape) for s in geometry.rest.shapes())
+    assert len(geometry.rest.shapes()) == len(scene.shapes()) - 1
+    ray, _ = camera_rays(scene)
+    si = geometry.ray_intersect(ray, mi.Bool(True))
+    lathe = geometry.lathes[0]
+    exact = lathe.ray_intersect_exact(ray)
+    is_lathe = (si.shape == mi.ShapePtr(lathe)).numpy()
+    np.testing.assert_array_equal(is_lathe, exact.is_valid().numpy() & (exact.t <= si.t).numpy())
+    np.testing.assert_allclose(si.t.numpy()[is_lathe], exact.t.numpy()[is_lathe])
+
+
+def test_furnace_energy_per_policy():
+    scene = furnace_scene(resolution=48)
+    results = {}
+    for policy in ("none", "terminate", "fallback"):
+        integrator = mi.load_dict({"type": "lathe_path", "max_depth": -1, "normal_check": policy})
+        results[policy] = run_furnace(scene, spp=64, integrator=integrator)
+    none, terminate, fallback = results["none"], results["terminate"], results["fallback"]
+    assert fallback.pixels > 300
+    assert abs(fallback.mean - 1.0) < 0.01
+    assert abs(none.mean - 1.0) < 0.03
+    assert terminate.loss > fallback.loss + 0.02  # the paper's rule loses energy
+    assert fallback.std < none.std  # ... and fallback removes speckles
+
+
+def test_furnace_without_smoothing_is_exact():
+    # With flat normals nothing can contradict: every policy is lossless.
+    profile_scene = furnace_scene(resolution=32)
+    lathe = next(s for s in profile_scene.shapes() if isinstance(s, LatheShape))
+    assert lathe.smooth
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": profile_scene.sensors()[0],
+        "light": {"type": "constant"},
+        "glass": {"type": "lathe", "profile": lathe_profile_text(lathe), "smooth": False,
+                  "bsdf": {"type": "dielectric"}},
+    })
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": -1, "normal_check": "terminate"})
+    result = run_furnace(scene, spp=64, integrator=integrator)
+    assert abs(result.mean - 1.0) < 0.01
+
+
+def lathe_profile_text(lathe: LatheShape) -> str:
+    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in lathe.profile.points)
+
+
+def test_render_agrees_with_mesh_render():
+    # Same seed and the same sample consumption as Mitsuba's `path`: the two
+    # renders are correlated, so their difference is mostly geometry.
+    errors = []
+    for segments in ("64", "2048"):
+        scene = load_scene("wine_glass", res="48", mesh_segments=segments, max_depth="8")
+        mesh = mi.render(scene, spp=64, seed=7).numpy()
+        exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": 8, "normal_check": "none"})
+        exact = mi.render(scene, spp=64, seed=7, integrator=exact_integrator).numpy()
+        assert np.isfinite(exact).all()
+        errors.append(np.abs(mesh - exact).mean() / exact.mean())
+        assert abs(mesh.mean() - exact.mean()) / exact.mean() < 0.02
+    assert errors[1] < errors[0]
+    assert errors[1] < 0.05
+
+
+@pytest.mark.parametrize("bsdf", [
+    {"type": "diffuse"},
+    {"type": "roughdielectric", "alpha": 0.1},
+    {"type": "thindielectric"},
+    {"type": "conductor"},
+])
+def test_any_bsdf_on_a_lathe(bsdf):
+    scene = furnace_scene(resolution=32, bsdf=bsdf, integrator={"type": "lathe_path", "max_depth": 8})
+    image = mi.render(scene, spp=16).numpy()
+    assert np.isfinite(image).all()
+    mesh = mi.render(scene, spp=16, integrator=mi.load_dict({"type": "path", "max_depth": 8})).numpy()
+    mask = glass_mask(scene)
+    assert abs(image[mask].mean() - mesh[mask].mean()) < 0.05
+
+
+@pytest.mark.parametrize("params", [{"max_depth": 1}, {"max_depth": 2}, {"hide_emitters": True}])
+def test_parameters_match_stock_path(params):
+    scene = furnace_scene(resolution=32)
+    exact = mi.render(scene, spp=32, seed=2, integrator=mi.load_dict({"type": "lathe_path", **params}))
+    mesh = mi.render(scene, spp=32, seed=2, integrator=mi.load_dict({"type": "path", **params}))
+    exact, mesh = exact.numpy(), mesh.numpy()
+    assert np.isfinite(exact).all()
+    assert abs(exact.mean() - mesh.mean()) < 0.05 * mesh.mean()
+    if params.get("max_depth") == 1:
+        # Only directly visible emitters: the glass itself is black (pixels
+        # away from its silhouette).
+        mask = glass_mask(scene)
+        inner = mask & np.roll(mask, 1, 0) & np.roll(mask, -1, 0) & np.roll(mask, 1, 1) & np.roll(mask, -1, 1)
+        assert inner.sum() > 20 and exact.mean(axis=2)[inner].max() == 0.0
+
+
+def test_shadow_of_lathe_matches_mesh():
+    # A diffuse lathe on a diffuse floor, lit by a small area light: the
+    # shadow comes from exact shadow rays and must match the mesh's.
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, -8, 8], target=[0, 0, 0],
+                                                              up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32}},
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(10)},
+        "light": {"type": "sphere", "radius": 0.3, "center": [2, 1, 5],
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [40, 40, 40]}}},
+        "pot": {"type": "lathe", "profile": "0 0, 1 0, 1.2 1.5, 0.6 2.5, 0 2.5", "mesh_segments": 1024},
+    })
+    mesh = mi.render(scene, spp=64, seed=1, integrator=mi.load_dict({"type": "path", "max_depth": 3})).numpy()
+    exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": 3})
+    exact = mi.render(scene, spp=64, seed=1, integrator=exact_integrator).numpy()
+    assert np.abs(mesh - exact).mean() / mesh.mean() < 0.02
+
+
+def test_parameter_errors():
+    with pytest.raises(RuntimeError, match=re.escape(
+            "lathe_path: parameter 'normal_check': unknown policy 'bend' "
+            "(expected one of: none, terminate, fallback)")):
+        mi.load_dict({"type": "lathe_path", "normal_check": "bend"})
+    with pytest.raises(RuntimeError, match="parameter 'max_depth' must be -1"):
+        mi.load_dict({"type": "lathe_path", "max_depth": -3})
+    integrator = mi.load_dict({"type": "lathe_path"})
+    assert isinstance(integrator, LathePathIntegrator) and integrator.normal_check == "fallback"
