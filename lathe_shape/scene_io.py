@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 
-__all__ = ["SceneError", "load_scene", "parse_defines", "parse_resolution"]
+__all__ = ["SceneError", "integrator_name", "load_scene", "parse_defines", "parse_resolution"]
 
 
 class SceneError(RuntimeError):
@@ -56,6 +56,16 @@ def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
             node.tag = "integer"
             node.set("value", str(value))
     return ET.tostring(root, encoding="unicode")
+
+
+def integrator_name(integrator: mi.Integrator) -> str:
+    """``PathIntegrator`` for Mitsuba's own integrators; the Python class name
+    (``LathePathIntegrator``) for Python ones, whose ``class_name()`` is
+    only their C++ base class (``SamplingIntegrator``)."""
+    cls = type(integrator)
+    if cls.__module__.split(".")[0] != "mitsuba":
+        return cls.__name__
+    return integrator.class_name()
 
 
 def _without_traceback(message: str) -> str:

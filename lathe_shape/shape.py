@@ -190,14 +190,13 @@ class LatheShape(mi.Mesh):
         if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
             raise ValueError(f"lathe '{self.id()}': set_to_world needs a finite 4x4 matrix")
         buffers = self._mesh_buffers(matrix)
-        if scene is not None:
-            params, prefix = mi.traverse(scene), f"{self.id()}."
-            if prefix + "vertex_positions" not in params:
+        params = mi.traverse(self if scene is None else scene)
+        for name in ("vertex_positions", "vertex_normals"):
+            # This lathe's own parameter (keys of unnamed shapes are generated).
+            keys = [k for k in params.keys() if k.split(".")[-1] == name and params.properties[k][2] is self]
+            if not keys:
                 raise ValueError(f"lathe '{self.id()}' is not part of the given scene")
-        else:
-            params, prefix = mi.traverse(self), ""
-        for key in ("vertex_positions", "vertex_normals"):
-            params[prefix + key] = type(params[prefix + key])(buffers[key].ravel())
+            params[keys[0]] = type(params[keys[0]])(buffers[name].ravel())
         params.update()
         self._set_transform(matrix)
 

@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, load_scene, parse_defines, parse_resolution
+    from ..scene_io import SceneError, integrator_name, load_scene, parse_defines, parse_resolution
 
     def fail(message: str) -> int:
         print(f"lathe-render: error: {message}", file=sys.stderr)
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     integrator = scene.integrator()
     print(
         f"lathe-render: {args.scene} -> {output}\n"
-        f"  {width}x{height}, {spp} spp, integrator {integrator.class_name()}, "
+        f"  {width}x{height}, {spp} spp, integrator {integrator_name(integrator)}, "
         f"variant {args.variant}, seed {args.seed}",
         flush=True,
     )
@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 
     metadata = {
         "spp": int(spp),
-        "integrator": integrator.class_name(),
+        "integrator": integrator_name(integrator),
         "variant": args.variant,
         "seed": int(args.seed),
         "scene": os.path.abspath(args.scene),
