@@ -29,6 +29,7 @@ def furnace_scene(
     resolution: int = 64,
     bsdf: dict | None = None,
     profile: str = FURNACE_PROFILE,
+    smooth: bool = True,
 ) -> mi.Scene:
     """A lathe glass alone under a uniform white environment."""
     return mi.load_dict({
@@ -46,6 +47,7 @@ def furnace_scene(
             "type": "lathe",
             "profile": profile,
             "crease_angle": 60.0,
+            "smooth": smooth,
             "mesh_segments": 256,
             "bsdf": bsdf or {"type": "dielectric", "int_ior": 1.5},
         },

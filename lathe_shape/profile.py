@@ -112,13 +112,9 @@ def parse_profile_string(
     labels: list[str] = []
     for k, item in enumerate(items):
         label = f"{source}, point {k + 1}"
-        fields = item.split()
-        if len(fields) not in (2, 3):
-            raise ProfileError(
-                f"{label}: expected 'r z' or 'r z sharp', got {item!r}"
-            )
-        rows.append([_parse_float(f, label) for f in fields[:2]])
-        sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+        point, flag = _parse_row(item.split(), label, f"expected 'r z' or 'r z sharp', got {item!r}")
+        rows.append(point)
+        sharp.append(flag)
         labels.append(label)
     return _as_points(rows), np.array(sharp, dtype=bool), labels
 
@@ -146,14 +142,19 @@ def read_profile_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, l
         label = f"{path}, line {number}"
         if not rows and not labels and _is_header(fields):
             continue
-        if len(fields) not in (2, 3):
-            raise ProfileError(
-                f"{label}: expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}"
-            )
-        rows.append([_parse_float(f, label) for f in fields[:2]])
-        sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+        point, flag = _parse_row(fields, label, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
+        rows.append(point)
+        sharp.append(flag)
         labels.append(label)
     return _as_points(rows), np.array(sharp, dtype=bool), labels
+
+
+def _parse_row(fields: list[str], label: str, wrong_count: str) -> tuple[list[float], bool]:
+    """One point: ``r z`` or ``r z sharp`` -> ([r, z], sharp)."""
+    if len(fields) not in (2, 3):
+        raise ProfileError(f"{label}: {wrong_count}")
+    point = [_parse_float(f, label) for f in fields[:2]]
+    return point, len(fields) == 3 and _parse_flag(fields[2], label)
 
 
 def _is_header(fields: list[str]) -> bool:

@@ -4,11 +4,20 @@ clear errors."""
 from __future__ import annotations
 
 import os
+import tempfile
 import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 
-__all__ = ["SceneError", "integrator_name", "load_scene", "parse_defines", "parse_resolution"]
+__all__ = [
+    "SceneError",
+    "check_output_folder",
+    "integrator_name",
+    "load_scene",
+    "open_scene",
+    "parse_defines",
+    "parse_resolution",
+]
 
 
 class SceneError(RuntimeError):
@@ -109,3 +118,44 @@ def load_scene(
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     return scene
+
+
+def open_scene(
+    path: str | os.PathLike,
+    variant: str,
+    defines: list[str] | None = None,
+    resolution: str | None = None,
+    extra_defines: dict[str, str] | None = None,
+) -> mi.Scene:
+    """What every command-line tool does first: select ``variant``, register
+    the plugins, parse ``-D key=value`` items and a ``WxH`` resolution, load
+    the scene. Raises :class:`SceneError` with a clear message."""
+    if variant not in mi.variants():
+        raise SceneError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
+    try:
+        mi.set_variant(variant)
+        import lathe_shape
+
+        lathe_shape.register()
+    except (RuntimeError, ImportError) as e:
+        raise SceneError(str(e)) from None
+    values = parse_defines(defines)
+    values.update(extra_defines or {})
+    size = parse_resolution(resolution) if resolution else None
+    return load_scene(path, values, size)
+
+
+def check_output_folder(path: str | os.PathLike) -> str:
+    """Create the folder ``path`` if missing and check that files can be
+    created in it (by creating one: ``os.access`` says yes to root even on a
+    read-only mount); returns its absolute path."""
+    path = os.path.abspath(os.fspath(path))
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise SceneError(f"output folder '{path}' exists and is not a folder")
+    try:
+        os.makedirs(path, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
+            pass
+    except OSError as e:
+        raise SceneError(f"cannot write to output folder '{path}' ({e.strerror or e})") from None
+    return path

@@ -44,7 +44,6 @@ import math
 import os
 import re
 import sys
-import tempfile
 import time
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
@@ -55,7 +54,7 @@ import mitsuba as mi
 import numpy as np
 
 from .imageio import read_exr, write_exr, write_png
-from .scene_io import integrator_name
+from .scene_io import check_output_folder, integrator_name
 
 if TYPE_CHECKING:
     from .shape import LatheShape
@@ -406,21 +405,6 @@ class Turntable:
 
 
 # -- output -------------------------------------------------------------------
-
-
-def check_output_folder(path: str | os.PathLike) -> str:
-    """Create the folder ``path`` if missing and check that files can be
-    created in it; returns its absolute path."""
-    path = os.path.abspath(os.fspath(path))
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise TurntableError(f"output folder '{path}' exists and is not a folder")
-    try:
-        os.makedirs(path, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
-            pass
-    except OSError as e:
-        raise TurntableError(f"cannot write to output folder '{path}' ({e.strerror or e})") from None
-    return path
 
 
 def _temporary(path: str) -> str:

@@ -14,8 +14,6 @@ pays the JIT compilation).
 from __future__ import annotations
 
 import argparse
-import re
-import time
 from pathlib import Path
 
 import mitsuba as mi
@@ -44,28 +42,6 @@ def goblet_profile(segments: int) -> np.ndarray:
     return np.vstack([[[0.0, 0.0]], outer, inner, [[0.0, base + 0.6]]])
 
 
-def profile_text(points: np.ndarray) -> str:
-    return ", ".join(f"{r:.6f} {z:.6f}" for r, z in points)
-
-
-def load_with_profile(scene_file: Path, profile: str, **defines: str) -> mi.Scene:
-    text = scene_file.read_text()
-    inline = f'<string name="profile" value="{profile}"/>'
-    text = re.sub(r'<string name="filename" value="[^"]*"/>', inline, text)
-    return mi.load_string(text, **defines)
-
-
-def best_time(scene: mi.Scene, integrator: mi.Integrator, spp: int,
-              repeat: int) -> tuple[float, np.ndarray]:
-    image = mi.render(scene, spp=spp, seed=0, integrator=integrator).numpy()  # warm-up / compile
-    times = []
-    for k in range(repeat):
-        start = time.perf_counter()
-        image = mi.render(scene, spp=spp, seed=k + 1, integrator=integrator).numpy()
-        times.append(time.perf_counter() - start)
-    return min(times), image
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--res", type=int, default=256)
@@ -76,6 +52,7 @@ def main() -> None:
     args = parser.parse_args()
     mi.set_variant(args.variant)
     import lathe_shape  # noqa: F401
+    from lathe_shape.benchmark import best_render_time, load_with_profile
     from lathe_shape.shape import LatheShape
 
     defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth)}
@@ -89,8 +66,8 @@ def main() -> None:
     for name in ("wine_glass", "sundae_cup", "brandy_bottle"):
         scene = mi.load_file(str(ROOT / "scenes" / f"{name}.xml"), mesh_segments="2048", **defines)
         lathe = next(s for s in scene.shapes() if isinstance(s, LatheShape))
-        t_mesh, _ = best_time(scene, path_int, args.spp, args.repeat)
-        t_exact, _ = best_time(scene, exact_int, args.spp, args.repeat)
+        t_mesh, _ = best_render_time(scene, path_int, args.spp, args.repeat)
+        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat)
         print(f"{name:<15}{lathe.profile.segment_count:>9}{t_mesh:>15.3f}{t_exact:>16.3f}"
               f"{t_exact / t_mesh:>11.2f}x", flush=True)
 
@@ -98,9 +75,9 @@ def main() -> None:
     print(f"{'segments':>9}{'lathe_path [s]':>16}{'vs 31':>9}")
     base = None
     for segments in (31, 86, 300, 1000):
-        scene = load_with_profile(ROOT / "scenes" / "wine_glass.xml",
-                                  profile_text(goblet_profile(segments)), mesh_segments="64", **defines)
-        t_exact, _ = best_time(scene, exact_int, args.spp, args.repeat)
+        scene = load_with_profile(ROOT / "scenes" / "wine_glass.xml", goblet_profile(segments),
+                                  mesh_segments="64", **defines)
+        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat)
         base = base or t_exact
         print(f"{segments:>9}{t_exact:>16.3f}{t_exact / base:>8.2f}x", flush=True)
 

@@ -13,14 +13,13 @@ method's time, the spline/polyline time ratio (paper: about 18x; target
 from __future__ import annotations
 
 import argparse
-import re
-import time
 from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+GLASS_SCENE = ROOT / "scenes" / "wine_glass.xml"
 
 #: Control points of the 12-segment spline glass (open form: both ends on the
 #: axis, ends tripled by the B-spline rules).
@@ -28,33 +27,6 @@ SPLINE_GLASS = np.array([
     (0, 0), (3.5, 0), (0.3, 0.3), (0.35, 4.5), (0.5, 7.2), (4.8, 8.8),
     (4.0, 18.4), (3.78, 18.4), (4.45, 9.4), (0.9, 7.7), (0, 7.6),
 ], dtype=float)
-
-
-def points_text(points: np.ndarray) -> str:
-    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in points)
-
-
-def load_glass(kind: str, points: np.ndarray, defines: dict[str, str]) -> mi.Scene:
-    text = (ROOT / "scenes" / "wine_glass.xml").read_text()
-    shape = f'<string name="profile" value="{points_text(points)}"/><string name="kind" value="{kind}"/>'
-    text = re.sub(r'<string name="filename" value="[^"]*"/>', shape, text)
-    resolver = mi.file_resolver()
-    saved = mi.FileResolver(resolver)
-    resolver.prepend(str(ROOT / "scenes"))
-    try:
-        return mi.load_string(text, **defines)
-    finally:
-        mi.set_file_resolver(saved)
-
-
-def best_time(scene: mi.Scene, integrator: mi.Integrator, spp: int, repeat: int) -> tuple[float, np.ndarray]:
-    mi.render(scene, spp=spp, seed=0, integrator=integrator).numpy()  # warm-up: JIT compile
-    times, image = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        image = mi.render(scene, spp=spp, seed=1, integrator=integrator).numpy()
-        times.append(time.perf_counter() - start)
-    return min(times), image
 
 
 def main() -> None:
@@ -67,6 +39,7 @@ def main() -> None:
     args = parser.parse_args()
     mi.set_variant(args.variant)
     import lathe_shape  # noqa: F401
+    from lathe_shape.benchmark import best_render_time, load_with_profile
     from lathe_shape.bspline import to_polyline
     from lathe_shape.surfaces import make_bspline_profile
 
@@ -77,15 +50,15 @@ def main() -> None:
     print(f"variant {args.variant}, {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, "
           f"best of {args.repeat}; spline glass of {spline.segment_count} segments")
 
-    t_spline, img_spline = best_time(load_glass("bspline", SPLINE_GLASS, defines), integrator,
-                                     args.spp, args.repeat)
+    spline_scene = load_with_profile(GLASS_SCENE, SPLINE_GLASS, "bspline", **defines)
+    t_spline, img_spline = best_render_time(spline_scene, integrator, args.spp, args.repeat)
     print(f"\n{'profile':<28}{'segments':>9}{'time [s]':>10}{'spline/this':>13}{'rel. error':>12}")
     print(f"{'exact B-spline':<28}{spline.segment_count:>9}{t_spline:>10.3f}{1.0:>12.2f}x{0.0:>12.4f}")
     for segments in (31, 86):
         for method in ("adaptive", "uniform"):
             poly = to_polyline(spline.segment_controls, segments + 1, method)
-            t_poly, img_poly = best_time(load_glass("polyline", poly, defines), integrator,
-                                         args.spp, args.repeat)
+            poly_scene = load_with_profile(GLASS_SCENE, poly, "polyline", **defines)
+            t_poly, img_poly = best_render_time(poly_scene, integrator, args.spp, args.repeat)
             err = np.abs(img_poly - img_spline).mean() / img_spline.mean()
             print(f"{method + ' polyline':<28}{segments:>9}{t_poly:>10.3f}{t_spline / t_poly:>12.2f}x"
                   f"{err:>12.4f}", flush=True)

@@ -28,10 +28,17 @@ def main() -> None:
     scene = furnace_scene(resolution=args.res)
     print(f"furnace: {args.res}x{args.res}, {args.spp} spp, max_depth -1, dielectric int_ior 1.5")
     print(f"{'normal_check':<14}{'mean':>10}{'energy loss':>13}{'std':>10}{'speckles':>10}")
-    for policy in NORMAL_CHECKS:
-        integrator = mi.load_dict({"type": "lathe_path", "max_depth": -1, "normal_check": policy})
-        r = run_furnace(scene, spp=args.spp, integrator=integrator)
-        print(f"{policy:<14}{r.mean:>10.4f}{r.loss:>+13.4f}{r.std:>10.4f}{r.speckle:>10.2%}")
+    rows = [(policy, {"type": "lathe_path", "max_depth": -1, "normal_check": policy})
+            for policy in NORMAL_CHECKS]
+    # Baselines: stock `path` on the reference mesh (vertex normals), and the
+    # exact lathe with flat normals (nothing can contradict: lossless).
+    rows.append(("path (mesh)", {"type": "path", "max_depth": -1}))
+    for label, integrator in rows:
+        r = run_furnace(scene, spp=args.spp, integrator=mi.load_dict(integrator))
+        print(f"{label:<14}{r.mean:>10.4f}{r.loss:>+13.4f}{r.std:>10.4f}{r.speckle:>10.2%}")
+    flat = furnace_scene(resolution=args.res, smooth=False)
+    r = run_furnace(flat, spp=args.spp, integrator=mi.load_dict({"type": "lathe_path", "max_depth": -1}))
+    print(f"{'flat normals':<14}{r.mean:>10.4f}{r.loss:>+13.4f}{r.std:>10.4f}{r.speckle:>10.2%}")
 
 
 if __name__ == "__main__":

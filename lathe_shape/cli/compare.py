@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, load_scene, parse_defines, parse_resolution
+    from ..scene_io import SceneError, check_output_folder, open_scene
 
     def fail(message: str) -> int:
         print(f"lathe-compare: error: {message}", file=sys.stderr)
@@ -135,28 +135,12 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--spp must be at least 1, got {args.spp}")
     if args.mesh_segments is not None and args.mesh_segments < 3:
         return fail(f"--mesh-segments must be at least 3, got {args.mesh_segments}")
-    if args.variant not in mi.variants():
-        return fail(f"unknown variant '{args.variant}' (available: {', '.join(mi.variants())})")
+    extra = {} if args.mesh_segments is None else {"mesh_segments": str(args.mesh_segments)}
     try:
-        mi.set_variant(args.variant)
-        import lathe_shape
-
-        lathe_shape.register()
-        defines = parse_defines(args.defines)
-        if args.mesh_segments is not None:
-            defines["mesh_segments"] = str(args.mesh_segments)
-        resolution = parse_resolution(args.resolution) if args.resolution else None
-        scene = load_scene(args.scene, defines, resolution)
-    except (SceneError, RuntimeError, ImportError) as e:
+        scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
+        out = check_output_folder(args.output)
+    except SceneError as e:
         return fail(str(e))
-
-    out = args.output
-    try:
-        os.makedirs(out, exist_ok=True)
-    except OSError as e:
-        return fail(f"cannot create output folder '{out}' ({e.strerror})")
-    if not os.access(out, os.W_OK):
-        return fail(f"cannot write to output folder '{out}'")
     if not scene.sensors():
         return fail(f"{args.scene}: the scene has no sensor")
     lathes = [s for s in scene.shapes() if hasattr(s, "ray_intersect_exact")]

@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, integrator_name, load_scene, parse_defines, parse_resolution
+    from ..scene_io import SceneError, check_output_folder, integrator_name, open_scene
 
     def fail(message: str) -> int:
         print(f"lathe-render: error: {message}", file=sys.stderr)
@@ -49,23 +49,12 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.spp is not None and args.spp < 1:
         return fail(f"--spp must be at least 1, got {args.spp}")
-    if args.variant not in mi.variants():
-        return fail(f"unknown variant '{args.variant}' (available: {', '.join(mi.variants())})")
-    try:
-        mi.set_variant(args.variant)
-        import lathe_shape
-
-        lathe_shape.register()
-        defines = parse_defines(args.defines)
-        resolution = parse_resolution(args.resolution) if args.resolution else None
-        scene = load_scene(args.scene, defines, resolution)
-    except (SceneError, RuntimeError, ImportError) as e:
-        return fail(str(e))
-
     output = args.output or os.path.splitext(args.scene)[0] + ".exr"
-    out_dir = os.path.dirname(os.path.abspath(output))
-    if not os.path.isdir(out_dir) or not os.access(out_dir, os.W_OK):
-        return fail(f"cannot write to output folder '{out_dir}'")
+    try:
+        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
+        check_output_folder(os.path.dirname(os.path.abspath(output)))
+    except SceneError as e:
+        return fail(str(e))
     if not scene.sensors():
         return fail(f"{args.scene}: the scene has no sensor")
     sensor = scene.sensors()[0]

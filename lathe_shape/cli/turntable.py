@@ -105,9 +105,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
-    import mitsuba as mi
 
-    from ..scene_io import SceneError, load_scene, parse_defines, parse_resolution
+    from ..scene_io import SceneError, open_scene
     from ..turntable import (
         JOB_KEYS,
         Frame,
@@ -139,20 +138,12 @@ def _run(args: argparse.Namespace) -> int:
         return fail(f"--threads must be at least 1, got {args.threads}")
     if not args.fps > 0:
         return fail(f"--fps must be positive, got {args.fps:g}")
-    if args.variant not in mi.variants():
-        return fail(f"unknown variant '{args.variant}' (available: {', '.join(mi.variants())})")
     mode = "orbit" if args.orbit else "rotate"
     output = args.output or os.path.splitext(args.scene)[0] + "_turntable"
     try:
         indices = parse_frames(args.frames, args.count)
         require_video(args.gif, args.mp4)
-        mi.set_variant(args.variant)
-        import lathe_shape
-
-        lathe_shape.register()
-        defines = parse_defines(args.defines)
-        resolution = parse_resolution(args.resolution) if args.resolution else None
-        scene = load_scene(args.scene, defines, resolution)
+        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
         turntable = Turntable(scene, mode, args.object, scene_path=args.scene)
         out_dir = check_output_folder(output)
     except (SceneError, TurntableError, RuntimeError, ImportError) as e:

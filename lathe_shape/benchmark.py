@@ -1,0 +1,47 @@
+"""Helpers of the benchmark scripts: best-of-N render timing and scenes whose
+lathe profile is replaced inline."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["best_render_time", "load_with_profile", "points_text"]
+
+
+def points_text(points: np.ndarray) -> str:
+    """(n, 2) points -> the inline ``"r z, r z, ..."`` profile string."""
+    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in points)
+
+
+def load_with_profile(scene_file: str | Path, points: np.ndarray, kind: str = "polyline",
+                      **defines: str) -> mi.Scene:
+    """Load a scene whose lathe's ``filename`` is replaced by the inline
+    profile ``points`` of the given ``kind``."""
+    scene_file = Path(scene_file)
+    shape = f'<string name="profile" value="{points_text(points)}"/><string name="kind" value="{kind}"/>'
+    text = re.sub(r'<string name="filename" value="[^"]*"/>', shape, scene_file.read_text())
+    resolver = mi.file_resolver()
+    saved = mi.FileResolver(resolver)
+    resolver.prepend(str(scene_file.parent))
+    try:
+        return mi.load_string(text, **defines)
+    finally:
+        mi.set_file_resolver(saved)
+
+
+def best_render_time(scene: mi.Scene, integrator: mi.Integrator, spp: int,
+                     repeat: int) -> tuple[float, np.ndarray]:
+    """Best wall time of ``repeat`` renders after a warm-up render (which
+    pays the JIT compilation), and the last image."""
+    image = mi.render(scene, spp=spp, seed=0, integrator=integrator).numpy()
+    times = []
+    for k in range(repeat):
+        start = time.perf_counter()
+        image = mi.render(scene, spp=spp, seed=k + 1, integrator=integrator).numpy()
+        times.append(time.perf_counter() - start)
+    return min(times), image
