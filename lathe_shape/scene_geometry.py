@@ -22,7 +22,9 @@ class ExactSceneGeometry:
     """Nearest-hit and shadow-ray queries with every lathe made exact."""
 
     def __init__(self, scene: mi.Scene) -> None:
-        self.scene = scene
+        # No reference to the scene itself: it owns the integrator that owns
+        # this object (a cycle through C++ references would never be freed).
+        self.fingerprint = self.scene_fingerprint(scene)
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = [s for s in shapes if isinstance(s, LatheShape)]
         others = [s for s in shapes if not isinstance(s, LatheShape)]
@@ -30,9 +32,26 @@ class ExactSceneGeometry:
             self.rest = scene
         else:
             description: dict[str, object] = {"type": "scene"}
+            ids = [shape.id() for shape in others]
             for index, shape in enumerate(others):
                 description[f"shape_{index}"] = shape
             self.rest = mi.load_dict(description)
+            # load_dict renames the shared objects after their keys; restore
+            # their ids so that mi.traverse(scene) keeps the user's names.
+            for shape, name in zip(others, ids, strict=True):
+                shape.set_id(name)
+
+    @staticmethod
+    def scene_fingerprint(scene: mi.Scene) -> tuple:
+        """Identity and bounds of every shape: changes when the scene is
+        another one, or when shapes are moved or edited (mi.traverse)."""
+        return tuple(
+            (shape.ptr, tuple(shape.bbox().min), tuple(shape.bbox().max)) for shape in scene.shapes()
+        )
+
+    def matches(self, scene: mi.Scene) -> bool:
+        """Whether this geometry is still valid for ``scene``."""
+        return self.fingerprint == self.scene_fingerprint(scene)
 
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""

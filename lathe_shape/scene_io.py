@@ -17,6 +17,7 @@ __all__ = [
     "open_scene",
     "parse_defines",
     "parse_resolution",
+    "scene_integrator",
 ]
 
 
@@ -67,6 +68,13 @@ def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def scene_integrator(scene: mi.Scene) -> mi.Integrator:
+    """The scene's integrator, or stock ``path`` (like Mitsuba's own CLI)
+    when the scene names none."""
+    integrator = scene.integrator()
+    return integrator if integrator is not None else mi.load_dict({"type": "path"})
+
+
 def integrator_name(integrator: mi.Integrator) -> str:
     """``PathIntegrator`` for Mitsuba's own integrators; the Python class name
     (``LathePathIntegrator``) for Python ones, whose ``class_name()`` is
@@ -95,6 +103,8 @@ def load_scene(
     """Load a Mitsuba XML scene (after ``import lathe_shape`` registered the
     plugins), optionally overriding the film resolution."""
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise SceneError(f"'{path}' is a folder, not a scene file")
     if not os.path.isfile(path):
         raise SceneError(f"scene file '{path}' not found")
     defines = dict(defines or {})
@@ -114,7 +124,10 @@ def load_scene(
     except SceneError:
         raise
     except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError
-        raise SceneError(f"{path}: could not load the scene:\n{_without_traceback(str(e))}") from None
+        # With a resolution override Mitsuba parsed a string: name the file.
+        message = _without_traceback(str(e)).replace("At string (", f"At {path} (")
+        message = message.replace("While loading string (", f"While loading {path} (")
+        raise SceneError(f"{path}: could not load the scene:\n{message}") from None
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     return scene

@@ -43,7 +43,8 @@
      - boolean
      - Flip the surface orientation, as for any Mitsuba shape.
 
-Nested ``<bsdf>``, ``<emitter>`` and media work as for any shape.
+Nested ``<bsdf>`` and ``<emitter>`` work as for any shape (``lathe_path``
+does not handle participating media).
 
 The plugin is a :class:`mitsuba.Mesh` holding the reference tessellation, so
 stock integrators (``path``, ``volpath``, ...) render it as a smooth-shaded
@@ -67,6 +68,20 @@ __all__ = ["LatheShape", "load_surface", "register"]
 def _describe(props: mi.Properties) -> str:
     name = props.id()
     return f"lathe '{name}'" if name else "lathe"
+
+
+def typed_property(props: mi.Properties, name: str, kind: type, default, who: str):
+    """``props[name]`` checked to be a ``kind`` (bool, int, float or str):
+    the XML tag must match, e.g. ``<boolean name="smooth" value="false"/>``
+    (a ``<string>`` "false" would otherwise read as true)."""
+    value = props.get(name, default)
+    ok = isinstance(value, kind) and not (kind is int and isinstance(value, bool))
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value, ok = float(value), True
+    if not ok:
+        tag = {bool: "boolean", int: "integer", float: "float", str: "string"}[kind]
+        raise ValueError(f"{who}: parameter '{name}' must be given as <{tag}>, got {value!r}")
+    return value
 
 
 def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray, list[str], str]:
@@ -103,9 +118,11 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
     Raises :class:`ValueError` naming the file or parameter on bad input.
     """
     who = _describe(props)
-    kind = props.get("kind", "polyline")
-    crease = float(props.get("crease_angle", 30.0))
-    smooth = bool(props.get("smooth", True))
+    kind = typed_property(props, "kind", str, "polyline", who)
+    crease = typed_property(props, "crease_angle", float, 30.0, who)
+    smooth = typed_property(props, "smooth", bool, True, who)
+    if not (0.0 <= crease <= 180.0):
+        raise ValueError(f"{who}: parameter 'crease_angle' must be within [0, 180] degrees, got {crease:g}")
     if kind not in SURFACE_KINDS:
         raise ValueError(
             f"{who}: parameter 'kind': unknown profile kind '{kind}' "
@@ -129,22 +146,24 @@ class LatheShape(mi.Mesh):
 
     def __init__(self, props: mi.Properties) -> None:
         who = _describe(props)
-        steps = int(props.get("mesh_segments", 256))
+        steps = typed_property(props, "mesh_segments", int, 256, who)
         if steps < 3:
             raise ValueError(f"{who}: parameter 'mesh_segments' must be at least 3, got {steps}")
         #: The profile kind's surface: tessellation and exact kernels.
         self.surface = load_surface(props)
         self.profile = self.surface.profile
         self.smooth = self.surface.smooth
-        self.flip = bool(props.get("flip_normals", False))
+        self.flip = typed_property(props, "flip_normals", bool, False, who)
         to_world = props.get("to_world", mi.ScalarTransform4f())
         #: (4, 4) float64 local-to-world matrix.
         self.to_world_matrix = np.array(to_world.matrix, dtype=np.float64)
+        _check_transform(self.to_world_matrix, f"{who}: parameter 'to_world'")
         #: The reference tessellation in the local frame.
         self.local_mesh = self.surface.tessellate(steps)
 
         super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
-                         len(self.local_mesh.faces), props, has_vertex_normals=True)
+                         len(self.local_mesh.faces), props, has_vertex_normals=True,
+                         has_vertex_texcoords=True)
         params = mi.traverse(self)
         for key, value in self._mesh_buffers(self.to_world_matrix).items():
             # The buffer types differ between JIT and scalar variants.
@@ -173,6 +192,7 @@ class LatheShape(mi.Mesh):
         return {
             "vertex_positions": positions.astype(np.float32),
             "vertex_normals": normals.astype(np.float32),
+            "vertex_texcoords": mesh.texcoords.astype(np.float32),
             "faces": np.ascontiguousarray(faces, dtype=np.uint32),
         }
 
@@ -187,8 +207,13 @@ class LatheShape(mi.Mesh):
         if isinstance(matrix, (mi.ScalarTransform4f, mi.ScalarTransform4d)):
             matrix = np.array(matrix.matrix, dtype=np.float64)
         matrix = np.asarray(matrix, dtype=np.float64)
-        if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
-            raise ValueError(f"lathe '{self.id()}': set_to_world needs a finite 4x4 matrix")
+        who = (f"lathe '{self.id()}'" if self.id() else "lathe") + ": set_to_world"
+        if matrix.shape != (4, 4):
+            raise ValueError(f"{who} needs a 4x4 matrix, got shape {matrix.shape}")
+        _check_transform(matrix, who)
+        if np.linalg.det(matrix[:3, :3]) * np.linalg.det(self.to_world_matrix[:3, :3]) < 0.0:
+            # The mesh's face winding was fixed for the original handedness.
+            raise ValueError(f"{who}: the new transform mirrors the shape relative to the old one")
         buffers = self._mesh_buffers(matrix)
         params = mi.traverse(self if scene is None else scene)
         for name in ("vertex_positions", "vertex_normals"):
@@ -208,7 +233,9 @@ class LatheShape(mi.Mesh):
         Returns a full :class:`mitsuba.SurfaceInteraction3f`: ``t`` (inf on a
         miss), ``p``, geometric ``n``, ``sh_frame`` from the interpolated
         normal (the geometric one when ``smooth`` is false or the profile is
-        a B-spline), ``uv`` (azimuth / 2 pi, position along the profile),
+        a B-spline), ``uv`` (azimuth / 2 pi, position along the profile:
+        arclength fraction for polylines, (segment + t) / segments for
+        B-splines; the reference mesh carries the same texture coordinates),
         ``dp_du``, ``dp_dv``, ``prim_index`` (profile segment), ``shape``
         (this lathe) and ``wi``.
         """
@@ -257,6 +284,17 @@ class LatheShape(mi.Mesh):
             f"segments={self.profile.segment_count}, r_max={r_max:g}, "
             f"z=[{z_min:g}, {z_max:g}], smooth={self.smooth}]"
         )
+
+
+def _check_transform(matrix: np.ndarray, who: str) -> None:
+    """A usable local-to-world transform: finite, affine, invertible."""
+    if not np.isfinite(matrix).all():
+        raise ValueError(f"{who}: the transform has non-finite entries")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{who}: the transform must be affine (no projection)")
+    linear = matrix[:3, :3]
+    if abs(np.linalg.det(linear)) <= 1e-12 * max(1.0, float(np.abs(linear).max())) ** 3:
+        raise ValueError(f"{who}: the transform is singular (a zero scale?)")
 
 
 def _unsupported_variant(props: mi.Properties) -> mi.Shape:

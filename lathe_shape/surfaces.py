@@ -116,8 +116,10 @@ class BSplineSurface:
         self.max_angle_deg = max_angle_deg
         self._data = None
 
-    def sample_profile(self) -> tuple[np.ndarray, np.ndarray]:
-        """Adaptive (r, z) samples of the curve and exact unit normals there."""
+    def sample_profile(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Adaptive (r, z) samples of the curve, exact unit normals there, and
+        v = (segment + t) / segments (the exact kernel's texture v). A closed
+        curve's last sample repeats its first (v = 1 there)."""
         seg = self.profile.segment_controls
         samples = bs.sample_adaptive(seg, max_angle_deg=self.max_angle_deg)
         index = np.array([i for i, _ in samples])
@@ -126,8 +128,7 @@ class BSplineSurface:
         dr, dz = bs.derivative(seg, index, t)
         points = np.stack([r, z], axis=1)
         tangent = np.stack([dr, dz], axis=1)
-        if self.profile.closed_loop:
-            points, tangent = points[:-1], tangent[:-1]  # the last sample repeats the first
+        v = (index + t) / self.profile.segment_count
         # Where the tangent vanishes (the tripled ends of the open form, whose
         # first and last segments are straight lines), use the chord.
         scale = float(np.abs(points).max()) or 1.0
@@ -135,19 +136,20 @@ class BSplineSurface:
         degenerate = length <= 1e-9 * scale
         chord = np.zeros_like(points)
         chord[:-1] = points[1:] - points[:-1]
-        chord[-1] = points[-1] - points[-2] if not self.profile.closed_loop else points[0] - points[-1]
+        chord[-1] = points[-1] - points[-2]
         tangent[degenerate] = chord[degenerate]
         tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
         normals = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)  # left-hand: outward
         points[np.abs(points[:, 0]) < 1e-12 * scale, 0] = 0.0
-        return points, normals
+        if self.profile.closed_loop:
+            points[-1] = points[0]  # bit-identical seam positions
+        return points, normals, v
 
     def tessellate(self, steps: int) -> TriangleMesh:
-        points, normals = self.sample_profile()
-        n = len(points)
-        start = np.arange(n if self.profile.closed_loop else n - 1)
-        bands = np.stack([start, (start + 1) % n], axis=1)
-        return revolve(points, normals, bands, steps)
+        points, normals, v = self.sample_profile()
+        start = np.arange(len(points) - 1)
+        bands = np.stack([start, start + 1], axis=1)
+        return revolve(points, normals, v, bands, steps)
 
     @property
     def data(self):

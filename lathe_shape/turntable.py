@@ -54,7 +54,7 @@ import mitsuba as mi
 import numpy as np
 
 from .imageio import read_exr, write_exr, write_png
-from .scene_io import check_output_folder, integrator_name
+from .scene_io import check_output_folder, integrator_name, scene_integrator
 
 if TYPE_CHECKING:
     from .shape import LatheShape
@@ -342,6 +342,8 @@ class Turntable:
             raise TurntableError(f"unknown turntable mode '{mode}' (expected one of: {', '.join(MODES)})")
         self.scene = scene
         self.mode = mode
+        #: The scene's integrator (stock ``path`` when it names none).
+        self.integrator = scene_integrator(scene)
         lathes = scene_lathes(scene, scene_path)
         #: The lathe that turns (rotate) or whose axis the camera orbits.
         self.lathe: LatheShape | None = None
@@ -400,7 +402,8 @@ class Turntable:
         sensor (``spp`` None: the sensor's sampler count): (H, W, 3) linear
         RGB float32."""
         self.pose(angle_deg)
-        image = mi.render(self.scene, spp=spp or 0, seed=seed, sensor=self.sensor)
+        image = mi.render(self.scene, spp=spp or 0, seed=seed, sensor=self.sensor,
+                          integrator=self.integrator)
         return np.asarray(image.numpy(), dtype=np.float32)[..., :3]
 
 

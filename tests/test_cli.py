@@ -45,3 +45,36 @@ def test_errors(tmp_path):
     assert variant.returncode == 2 and "unknown variant 'nope'" in variant.stderr
     res = run_cli(str(SCENES / "wine_glass.xml"), "--resolution", "axb")
     assert res.returncode == 2 and "resolution must look like 640x480 or 512, got 'axb'" in res.stderr
+
+
+NO_INTEGRATOR = """<scene version="3.0.0">
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0,-6,3" target="0,0,1" up="0,0,1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="12"/></film>
+    </sensor>
+    <emitter type="constant"/>
+    <shape type="lathe" id="g"><string name="profile" value="0 0, 1 0, 1 2, 0 2"/></shape>
+</scene>"""
+
+
+def test_scene_without_integrator_uses_path(tmp_path):
+    scene = tmp_path / "noint.xml"
+    scene.write_text(NO_INTEGRATOR)
+    result = run_cli(str(scene), "-o", str(tmp_path / "n.exr"), "--spp", "1")
+    assert result.returncode == 0, result.stderr
+    assert "integrator PathIntegrator" in result.stdout
+    pixels, _ = read_exr(tmp_path / "n.exr")
+    assert pixels.shape == (12, 16, 3) and pixels.mean() > 0
+
+
+def test_more_errors(tmp_path):
+    folder = run_cli(str(tmp_path))
+    assert folder.returncode == 2 and f"'{tmp_path}' is a folder, not a scene file" in folder.stderr
+    scene = tmp_path / "noint.xml"
+    scene.write_text(NO_INTEGRATOR)
+    png = run_cli(str(scene), "-o", str(tmp_path / "x.png"))
+    assert png.returncode == 2 and "the output must be an OpenEXR file ending in .exr" in png.stderr
+    bad = tmp_path / "bad.xml"
+    bad.write_text(NO_INTEGRATOR.replace("0 0, 1 0, 1 2, 0 2", "0 0, 1 0, 1 2, 0.5 2"))
+    res = run_cli(str(bad), "--resolution", "8x8", "-o", str(tmp_path / "b.exr"))
+    assert res.returncode == 2 and f"At {bad} (line" in res.stderr and "profile is not closed" in res.stderr

@@ -70,7 +70,13 @@ def test_filename_resolves_relative_to_scene(tmp_path):
         (lathe_xml(extra='<integer name="mesh_segments" value="2"/>'),
          "lathe 'glass': parameter 'mesh_segments' must be at least 3, got 2"),
         (lathe_xml(extra='<float name="crease_angle" value="200"/>'),
-         "crease_angle must be within [0, 180] degrees, got 200"),
+         "lathe 'glass': parameter 'crease_angle' must be within [0, 180] degrees, got 200"),
+        (lathe_xml(extra='<string name="smooth" value="false"/>'),
+         "lathe 'glass': parameter 'smooth' must be given as <boolean>, got 'false'"),
+        (lathe_xml(extra='<float name="mesh_segments" value="16.5"/>'),
+         "lathe 'glass': parameter 'mesh_segments' must be given as <integer>, got 16.5"),
+        (lathe_xml(extra='<transform name="to_world"><scale x="0"/></transform>'),
+         "lathe 'glass': parameter 'to_world': the transform is singular"),
     ],
 )
 def test_bad_parameters(shape_xml, message):
@@ -102,3 +108,18 @@ def test_scene_renders_with_stock_path(scene_file):
     empty = np.array(mi.render(scene_empty, seed=1))
     changed = np.abs(image - empty).max(axis=2) > 0.05
     assert changed.mean() > 0.02
+
+
+def test_set_to_world_moves_mesh_and_exact_surface():
+    scene = load(lathe_xml(extra='<integer name="mesh_segments" value="64"/>'))
+    (shape,) = scene.shapes()
+    moved = np.eye(4)
+    moved[:3, 3] = [3.0, 0.0, 0.5]
+    shape.set_to_world(moved, scene)
+    ray = mi.Ray3f(mi.Point3f(3.0, -10.0, 1.5), mi.Vector3f(0, 1, 0))
+    assert abs(scene.ray_intersect(ray).t[0] - 9.0) < 1e-2   # the mesh moved (r = 1)
+    assert abs(shape.ray_intersect_exact(ray).t[0] - 9.0) < 1e-4
+    with pytest.raises(ValueError, match="mirrors the shape relative to the old one"):
+        shape.set_to_world(np.diag([-1.0, 1.0, 1.0, 1.0]), scene)
+    with pytest.raises(ValueError, match="the transform is singular"):
+        shape.set_to_world(np.diag([0.0, 1.0, 1.0, 1.0]), scene)

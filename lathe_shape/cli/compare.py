@@ -107,6 +107,8 @@ def _scene_max_depth(scene) -> int | None:
     import mitsuba as mi
 
     integrator = scene.integrator()
+    if integrator is None:
+        return None
     params = mi.traverse(integrator)
     if "max_depth" in params:
         return int(params["max_depth"])

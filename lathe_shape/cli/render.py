@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, check_output_folder, integrator_name, open_scene
+    from ..scene_io import SceneError, check_output_folder, integrator_name, open_scene, scene_integrator
 
     def fail(message: str) -> int:
         print(f"lathe-render: error: {message}", file=sys.stderr)
@@ -50,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.spp is not None and args.spp < 1:
         return fail(f"--spp must be at least 1, got {args.spp}")
     output = args.output or os.path.splitext(args.scene)[0] + ".exr"
+    if not output.lower().endswith(".exr"):
+        return fail(f"the output must be an OpenEXR file ending in .exr, got '{output}'")
     try:
         scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
         check_output_folder(os.path.dirname(os.path.abspath(output)))
@@ -60,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     sensor = scene.sensors()[0]
     width, height = sensor.film().size()
     spp = args.spp or sensor.sampler().sample_count()
-    integrator = scene.integrator()
+    integrator = scene_integrator(scene)
     print(
         f"lathe-render: {args.scene} -> {output}\n"
         f"  {width}x{height}, {spp} spp, integrator {integrator_name(integrator)}, "
@@ -68,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     start = time.perf_counter()
-    image = mi.render(scene, spp=spp, seed=args.seed)
+    image = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator)
     rgb = image.numpy()
     elapsed = time.perf_counter() - start
 

@@ -152,7 +152,7 @@ def _run(args: argparse.Namespace) -> int:
     sensor = turntable.sensor
     width, height = (int(v) for v in sensor.film().size())
     spp = args.spp or sensor.sampler().sample_count()
-    integrator = integrator_name(scene.integrator())
+    integrator = integrator_name(turntable.integrator)
     label = f"'{turntable.object_id}'" if turntable.object_id else "(without id)"
     if mode == "rotate":
         what = f"lathe {label} spins about its axis"

@@ -8,49 +8,73 @@ Surface of segment ``i`` (eqs. 13-14), ``t`` in [0, 1]::
 
     x^2 + y^2 = R_i(t)^2,    z = Z_i(t)        (R_i, Z_i cubic in t)
 
-Ray ``o + s d``. With ``W(t) = Z(t) - o_z``, eq. 15 gives ``s = W(t) / d_z``;
-substituting into the first equation and multiplying by ``d_z^2`` keeps a
-polynomial of degree 6 in ``t`` that is also valid for ``d_z = 0``::
+Ray ``o + s d`` (unit ``d``), with ``a = d_x^2 + d_y^2``, ``s*`` the ray's
+closest approach to the axis, ``r0`` its distance there and ``z* = o_z +
+d_z s*``; the ray's radius obeys ``r(s)^2 = a (s - s*)^2 + r0^2``. Eq. 15
+gives ``s = (Z(t) - o_z) / d_z``; substituting into the first equation and
+multiplying by ``d_z^2`` keeps a polynomial of degree 6 in ``t`` that is also
+valid for ``d_z = 0``::
 
-    F(t) = a W(t)^2 + 2 d_z b W(t) + d_z^2 (c - R(t)^2) = 0,
-    a = d_x^2 + d_y^2,  b = o_x d_x + o_y d_y,  c = o_x^2 + o_y^2.
+    F(t) = a (Z(t) - z*)^2 - d_z^2 (R(t)^2 - r0^2) = 0.
 
-For a horizontal ray (``d_z = 0``) ``F = a W^2``: every root is a double
-root, at ``Z(t) = o_z`` (the cubic of method.md), and the two ray
-parameters follow from ``|o_xy + s d_xy| = R(t)``. Nearly horizontal rays give
-close root pairs. The solver below therefore reports both sign-change roots
-and tangent (double) roots of ``F``, and recovers ``s`` from whichever of the
-two ray equations is better conditioned: eq. 15 for steep rays
-(``d_z^2 >= a``), else ``s = s* -+ h`` from the radius (``s*`` the ray's
-closest approach to the axis), taking the branch whose z agrees, or both for a
-pair that float32 cannot resolve. Since ``F = a W^2`` has lost ``R`` for
-horizontal rays, every root must also pass ``R(t) >= r0`` (the ray's distance
-from the axis). The nearest hit is finally polished by two guarded Newton
-steps on the unsquared (s, t) system ``z(s) = Z(t)``, ``|xy(s)|^2 = R(t)^2``.
+(This equals ``|d_z o_xy + (Z - o_z) d_xy|^2 - d_z^2 R^2``: the ray's
+projection into the (r, z) half plane is a hyperbola branch and ``F`` is its
+implicit equation along the curve.) For a horizontal ray (``d_z = 0``) ``F =
+a (Z - o_z)^2``: every root is a double root, at ``Z(t) = o_z`` (the cubic of
+method.md), and the two ray parameters follow from ``|o_xy + s d_xy| =
+R(t)``. Nearly horizontal rays give close root pairs. The solver therefore
+reports both sign-change roots and tangent (double) roots of ``F``, and
+recovers ``s`` from whichever of the two ray equations is better
+conditioned: eq. 15 for steep rays (``d_z^2 >= a``), else ``s = s* -+ h``
+from the radius, taking the branch whose z agrees, or both for a pair that
+float32 cannot resolve. Since ``F = a W^2`` has lost ``R`` for horizontal
+rays, every root must also pass ``R(t) >= r0``. The nearest hit is finally
+polished by two guarded Newton steps on the unsquared (s, t) system
+``z(s) = Z(t)``, ``|xy(s)|^2 = R(t)^2``.
 
-Root finding (after C. Yuksel, "High-Performance Polynomial Root Finding for
-Graphics", HPG 2022): the roots of ``F'`` split [0, 1] into intervals on which
-``F`` is monotonic, so each holds at most one root, and it exists exactly when
-``F`` changes sign across it. The critical points come from the same idea one
-degree lower, recursively, down to a linear polynomial. Each bracketed root is
-found by safeguarded Newton steps (bisection when a step leaves the bracket
-or converges slowly; the answer is the evaluated point with the least |F|),
-so no root with a sign change can be missed; the iteration count only limits
-precision. A critical point where ``|F|`` is below the float32
-evaluation error bound is a tangent (double) root: a grazing hit.
+Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
+then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
+covers ``t = t0 + h u``, ``u`` in [0, 1], padded by ``_T_PAD`` in ``t`` on
+both sides (hits on a joint are found by both neighbours), and stores its
+cubics in that local parameter, both in power form and as Bernstein (Bezier)
+control points, plus an exact, padded annular bounding box.
 
-Culling: each segment has a padded bounding annular cylinder ``rmin <= r <=
-rmax``, ``zmin <= z <= zmax``. The ray's z gives a linear s-interval and
-``r(s)^2 <= rmax^2`` a quadratic one; ``r(s)^2`` is convex, so its maximum over
-their intersection is at an endpoint and decides ``r >= rmin``. Only segments
-whose box the ray meets before the current nearest hit are solved: a nested
-loop skips the others, so the costly solve runs once per candidate segment.
+Culling: a bounding volume hierarchy over the leaves' annular boxes in the
+(r, z) plane, stored four times as a threaded (stackless, pre-order with
+miss links) array whose copies differ in child order; each ray takes the
+copy that visits the lower / upper and outer / inner child first according
+to the signs of ``d_z`` and of its radial velocity, so near leaves come first
+and the nearest-hit interval shrinks early. A box is entered where ``z(s)``
+is in its slab and ``r(s) <= rmax``; ``r(s)^2`` is convex, so its maximum
+over that interval is at an end and decides ``r >= rmin``. A leaf whose box
+is met within (lo, best) is then tested with the Bernstein form of ``F`` on
+the leaf: the products ``R^2`` and ``(Z - z*)^2`` of Bezier cubics give the 7
+Bernstein coefficients of ``F`` directly, and when all exceed the float32
+error bound ``tol`` in magnitude with one sign (convex hull property), ``F``
+has no root, not even a grazing one, on the leaf. Only the leaves that pass
+(usually the few that the ray really crosses) are solved: an inner loop walks
+the tree to the next such leaf, so all lanes of a SIMD packet solve together.
+
+Root finding on a leaf (after C. Yuksel, "High-Performance Polynomial Root
+Finding for Graphics", HPG 2022): the roots of ``F'`` split [0, 1] into
+intervals on which ``F`` is monotonic, so each holds at most one root, and it
+exists exactly when ``F`` changes sign across it. The critical points come
+from the same idea one degree lower, recursively, down to a linear
+polynomial. Leaves are short, so ``F''`` rarely changes sign on one: when its
+5 Bernstein coefficients (second differences of those of ``F``) share a sign
+beyond their error bound, ``F'`` is monotonic, ``F`` has a single critical
+point and at most two roots, and three bracketed searches suffice. Only the
+other lanes run the full derivative chain (five levels, twenty searches),
+inside a symbolic ``if`` that packets without such a lane skip. Each
+bracketed root is found by safeguarded Newton steps (bisection when a step
+leaves the bracket or converges slowly; the answer is the evaluated point
+with the least ``|F|``), so no root with a sign change can be missed; the
+iteration count only limits precision. A critical point where ``|F|`` is
+below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision (traps.md, float32 cancellation): the ray origin is first moved to
 where the ray enters the lathe's bounding cylinder, all coefficients are
-built from that nearby origin, and ``s`` is shifted back at the end. The
-root search runs on ``[-eps, 1 + eps]`` (``eps`` = ``_T_PAD``) so that hits on
-a joint between two segments are found by both.
+built from that nearby origin, and ``s`` is shifted back at the end.
 """
 
 from __future__ import annotations
@@ -75,10 +99,21 @@ __all__ = [
 ]
 
 #: Floats per segment in ``BSplineData.seg``: R0..R3, Z0..Z3 (ascending
-#: powers of t), then the padded bounds rmin, rmax, zmin, zmax.
-_STRIDE = 12
+#: powers of t).
+_STRIDE = 8
 
-#: Parameter overlap: roots are searched on [-_T_PAD, 1 + _T_PAD].
+#: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
+#: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
+#: the leaf's parameter u), then (t0, h, segment, 0).
+_LEAF_STRIDE = 20
+
+#: Flag bit of a leaf's link word (low bits: leaf index).
+_LEAF = 0x80000000
+
+#: Longest leaf, in segment parameter t (before padding).
+_LEAF_T = 0.25
+
+#: Parameter overlap: leaves extend _T_PAD beyond their piece in t.
 _T_PAD = 1e-3
 
 #: Newton/bisection steps for critical points and for the roots of F.
@@ -88,7 +123,7 @@ _STEPS_ROOT = 12
 #: Relative tolerance of the R(t) >= r0 test of a root (grazing rays).
 _R0_REL_TOL = 1e-5
 
-#: Steps below this (about the float32 spacing near t = 1) end a root search.
+#: Steps below this (about the float32 spacing near u = 1) end a root search.
 _T_RESOLUTION = 1e-7
 
 #: Newton steps polishing the nearest hit on the (s, t) system.
@@ -103,25 +138,26 @@ _PAIR_WIDTH = 4.0
 
 
 class BSplineData:
-    """Packed, opaque segment buffers of one B-spline lathe (local frame).
+    """Packed, opaque buffers of one B-spline lathe (local frame).
 
     Attributes:
-        seg: ``mi.Float`` of ``n_seg * 12`` values (see ``_STRIDE``).
+        seg: ``mi.Float`` of ``n_seg * 8`` values (see ``_STRIDE``).
+        leaf: ``mi.Float`` of ``n_leaf * 20`` values (see ``_LEAF_STRIDE``).
+        nodes: ``mi.Float``, 4 values per node of the four threaded BVH
+            copies: the annular box ``(rmax, rmin^2, zmin, zmax)``.
+        links: ``mi.UInt32`` per node: an inner node's miss link, or
+            ``_LEAF | leaf index``.
+        n_nodes: opaque ``mi.UInt32``: nodes per copy.
         n_seg: opaque ``mi.UInt32`` (one element): number of segments.
-        n_seg_host: the same as a Python int.
-        cyl: opaque ``mi.Float`` values (rmax, zmin, zmax) of the padded
-            bounding cylinder of the whole curve.
+        n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
+        cyl_rmax, cyl_zmin, cyl_zmax: opaque ``mi.Float`` padded bounding
+            cylinder of the whole curve.
         scale: opaque ``mi.Float``: bounding-box diagonal of the profile.
     """
 
-    def __init__(self, seg, n_seg, n_seg_host, cyl_rmax, cyl_zmin, cyl_zmax, scale):
-        self.seg = seg
-        self.n_seg = n_seg
-        self.n_seg_host = n_seg_host
-        self.cyl_rmax = cyl_rmax
-        self.cyl_zmin = cyl_zmin
-        self.cyl_zmax = cyl_zmax
-        self.scale = scale
+    def __init__(self, **kwargs) -> None:
+        for key, value in kwargs.items():
+            setattr(self, key, value)
 
 
 #: Result types (shared with the polyline kernel).
@@ -144,26 +180,101 @@ def _cubic_range(c: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
     return float(v.min()), float(v.max())
 
 
+def _leaf_pieces(coef: np.ndarray) -> list[tuple[float, float]]:
+    """Pieces [ta, tb] of one segment: cut at the interior extrema of R and
+    Z (monotone pieces have corner-tight boxes), then evenly into pieces of
+    at most ``_LEAF_T``."""
+    cuts = {0.0, 1.0}
+    for c in coef:
+        if np.any(c[1:] != 0):
+            for root in np.roots([3 * c[3], 2 * c[2], c[1]]):
+                if abs(root.imag) < 1e-12 and 0.02 < root.real < 0.98:
+                    cuts.add(float(root.real))
+    cuts = sorted(cuts)
+    pieces = []
+    for ta, tb in zip(cuts[:-1], cuts[1:], strict=True):
+        n = max(1, math.ceil((tb - ta) / _LEAF_T - 1e-9))
+        edges = np.linspace(ta, tb, n + 1)
+        pieces += list(zip(edges[:-1], edges[1:], strict=True))
+    return pieces
+
+
+def _reparam(c: np.ndarray, t0: float, h: float) -> np.ndarray:
+    """Power coefficients in u of the cubic ``c`` at ``t = t0 + h u``."""
+    p = np.polynomial.Polynomial(c)(np.polynomial.Polynomial([t0, h])).coef
+    return np.pad(p, (0, 4 - len(p)))
+
+
+def _bezier(p: np.ndarray) -> np.ndarray:
+    """Bernstein (Bezier) coefficients on [0, 1] of the power-form cubic ``p``."""
+    return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
+
+
+def _build_tree(box: np.ndarray, idx: np.ndarray):
+    """Median-split BVH over leaf boxes ``(rmin, rmax, zmin, zmax)``:
+    ``('leaf', k, box)`` or ``('node', box, axis, lower, upper)``."""
+    b = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
+    if len(idx) == 1:
+        return ('leaf', int(idx[0]), b)
+    cr = 0.5 * (box[idx, 0] + box[idx, 1])
+    cz = 0.5 * (box[idx, 2] + box[idx, 3])
+    axis = 0 if np.ptp(cr) > np.ptp(cz) else 1
+    order = idx[np.argsort(cr if axis == 0 else cz, kind='stable')]
+    half = len(order) // 2
+    return ('node', b, axis, _build_tree(box, order[:half]), _build_tree(box, order[half:]))
+
+
+def _thread(tree, z_up: bool, r_out: bool, recs: list, links: list) -> None:
+    """Append ``tree`` in pre-order with miss links (global indices).
+    ``z_up``: lower child of a z split first; ``r_out``: outer child of an
+    r split first."""
+    if tree[0] == 'leaf':
+        rmin, rmax, zmin, zmax = tree[2]
+        recs.append([rmax, rmin * rmin, zmin, zmax])
+        links.append(_LEAF | tree[1])
+        return
+    _, (rmin, rmax, zmin, zmax), axis, lower, upper = tree
+    first, second = lower, upper
+    if (axis == 1 and not z_up) or (axis == 0 and r_out):
+        first, second = upper, lower
+    me = len(recs)
+    recs.append([rmax, rmin * rmin, zmin, zmax])
+    links.append(0)
+    _thread(first, z_up, r_out, recs, links)
+    _thread(second, z_up, r_out, recs, links)
+    links[me] = len(recs)
+
+
 def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
     """Pack validated per-segment control points (from
     :func:`lathe_shape.bspline.bspline_segments`, oriented clockwise) into
-    opaque Dr.Jit buffers, with padded per-segment bounds and the bounding
-    cylinder. Call once per shape."""
+    opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
+    threaded BVH and the bounding cylinder. Call once per shape."""
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
     coef = power_coefficients(seg_ctrl)  # (n_seg, 2, 4)
     n_seg = len(coef)
     pts = seg_ctrl.reshape(-1, 2)
     scale = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) or 1.0
-    lo, hi = -_T_PAD, 1.0 + _T_PAD
     # Absolute padding: float32 rounding of the data and of the ray.
     pad = 1e-5 * scale
-    table = np.zeros((n_seg, _STRIDE))
+    leaves, boxes = [], []
     for i in range(n_seg):
-        rmin, rmax = _cubic_range(coef[i, 0], lo, hi)
-        zmin, zmax = _cubic_range(coef[i, 1], lo, hi)
-        table[i, 0:4] = coef[i, 0]
-        table[i, 4:8] = coef[i, 1]
-        table[i, 8:12] = [max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad]
+        for ta, tb in _leaf_pieces(coef[i]):
+            t0, h = ta - _T_PAD, tb - ta + 2 * _T_PAD
+            rp = _reparam(coef[i, 0], t0, h)
+            zp = _reparam(coef[i, 1], t0, h)
+            rmin, rmax = _cubic_range(rp, 0.0, 1.0)
+            zmin, zmax = _cubic_range(zp, 0.0, 1.0)
+            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp, [t0, h, i, 0.0]]))
+            boxes.append([max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad])
+    boxes = np.array(boxes)
+    tree = _build_tree(boxes, np.arange(len(boxes)))
+    recs, links = [], []
+    # Copy index (see _trace): 2 * (d_z < 0) + (moving away from the axis).
+    for z_up, r_out in [(True, True), (True, False), (False, True), (False, False)]:
+        _thread(tree, z_up, r_out, recs, links)
+    n_nodes = 2 * len(boxes) - 1
+    assert len(recs) == 4 * n_nodes
 
     def opaque(value, cls=mi.Float):
         v = cls(value)
@@ -171,12 +282,17 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
         return v
 
     return BSplineData(
-        seg=opaque(table.ravel()),
+        seg=opaque(coef.reshape(n_seg, _STRIDE).ravel()),
+        leaf=opaque(np.asarray(leaves).ravel()),
+        nodes=opaque(np.asarray(recs).ravel()),
+        links=opaque(np.asarray(links, dtype=np.uint32), mi.UInt32),
+        n_nodes=opaque(n_nodes, mi.UInt32),
         n_seg=opaque(n_seg, mi.UInt32),
         n_seg_host=n_seg,
-        cyl_rmax=opaque(float(table[:, 9].max())),
-        cyl_zmin=opaque(float(table[:, 10].min())),
-        cyl_zmax=opaque(float(table[:, 11].max())),
+        n_leaf_host=len(leaves),
+        cyl_rmax=opaque(float(boxes[:, 1].max())),
+        cyl_zmin=opaque(float(boxes[:, 2].min())),
+        cyl_zmax=opaque(float(boxes[:, 3].max())),
         scale=opaque(scale),
     )
 
@@ -298,6 +414,7 @@ class _Ray:
         self.o, self.dh = o, dh
         self.a, self.b, self.c = a, b, c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
         self.s_star, self.r0sq = s_star, r0sq  # closest approach to the axis (xy)
+        self.zc = dr.fma(dh.z, s_star, o.z)    # z* = z at the closest approach
         self.lo, self.hi = lo, hi              # accepted open s-interval (lo, hi)
 
 
@@ -349,119 +466,218 @@ def _setup(data: BSplineData, o, d, tmax, active):
     return ray, active, shift, dn
 
 
-def _box_pass(data: BSplineData, i, ray: _Ray, best, active):
-    """Whether the ray meets segment ``i``'s annular box within (lo, best)."""
-    base = i * _STRIDE
-    rmin = dr.gather(mi.Float, data.seg, base + 8, active)
-    rmax = dr.gather(mi.Float, data.seg, base + 9, active)
-    zmin = dr.gather(mi.Float, data.seg, base + 10, active)
-    zmax = dr.gather(mi.Float, data.seg, base + 11, active)
-    s0, s1 = _slab(ray.o, ray.dh, ray.a, ray.s_star, ray.r0sq, rmax, zmin, zmax)
+def _box_enter(ray: _Ray, box, best, active):
+    """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
+    within (lo, best)."""
+    s0, s1 = _slab(ray.o, ray.dh, ray.a, ray.s_star, ray.r0sq, box.x, box.z, box.w)
     s0 = dr.maximum(s0, ray.lo)
     s1 = dr.minimum(s1, best)
     # r(s)^2 is convex: its maximum over [s0, s1] is at an endpoint.
     e0 = s0 - ray.s_star
     e1 = s1 - ray.s_star
     r2max = dr.fma(ray.a, dr.maximum(e0 * e0, e1 * e1), ray.r0sq)
-    return active & (s0 <= s1) & (r2max >= rmin * rmin)
+    return active & (s0 <= s1) & (r2max >= box.y)
+
+
+def _bezier_square(p: list) -> list:
+    """Bernstein coefficients (degree 6) of the square of a Bezier cubic:
+    ``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i p_j``."""
+    return [p[0] * p[0], p[0] * p[1],
+            dr.fma(2.0 * p[0], p[2], 3.0 * p[1] * p[1]) * 0.2,
+            dr.fma(p[0], p[3], 9.0 * p[1] * p[2]) * 0.1,
+            dr.fma(2.0 * p[1], p[3], 3.0 * p[2] * p[2]) * 0.2,
+            p[2] * p[3], p[3] * p[3]]
+
+
+def _hull(Rb, Zb, ray: _Ray):
+    """Bernstein coefficients of ``F`` (eqs. 14-15, in the form of the module
+    docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
+    float32 error of ``F`` and of these coefficients there."""
+    W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
+    R = [Rb.x, Rb.y, Rb.z, Rb.w]
+    W2 = _bezier_square(W)
+    R2 = _bezier_square(R)
+    k2 = ray.dh.z * ray.dh.z
+    G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
+    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull).
+    mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
+    mr = dr.maximum(dr.maximum(R[0], R[1]), dr.maximum(R[2], R[3]))
+    bound = dr.fma(ray.a, mw * mw, k2 * dr.fma(mr, mr, ray.r0sq))
+    return G, _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
+
+
+def _one_sign(c: list, tol):
+    """Whether all values of ``c`` exceed ``tol`` in magnitude with one sign."""
+    lo, hi = c[0], c[0]
+    for ck in c[1:]:
+        lo = dr.minimum(lo, ck)
+        hi = dr.maximum(hi, ck)
+    return (lo > tol) | (hi < -tol)
+
+
+def _visit(data: BSplineData, ray: _Ray, node, best, active):
+    """One traversal step: ``(candidate, next node)``. A candidate is a leaf
+    whose box the ray enters before ``best`` and whose Bernstein hull of
+    ``F`` does not exclude a root (or a grazing contact)."""
+    box = dr.gather(mi.Vector4f, data.nodes, node, active)
+    link = dr.gather(mi.UInt32, data.links, node, active)
+    is_leaf = (link & _LEAF) != 0
+    enter = _box_enter(ray, box, best, active)
+    m = enter & is_leaf
+    base = (link & (_LEAF - 1)) * (_LEAF_STRIDE // 4)
+    Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
+    Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
+    G, tol = _hull(Rb, Zb, ray)
+    cand = m & ~_one_sign(G, tol)
+    # Pre-order: descend into an entered inner node, else take its miss
+    # link; stay on a candidate (it is solved next).
+    nxt = dr.select(cand, node, dr.select(is_leaf | enter, node + 1, link))
+    return cand, nxt
 
 
 # ---------------------------------------------------------------------------
-# Per-segment solve
+# Per-leaf solve
 # ---------------------------------------------------------------------------
 
-def _solve_segment(data: BSplineData, i, ray: _Ray, best_s, best_u, best_seg, m):
-    """Intersect segment ``i`` (lanes ``m``); return the updated nearest hit."""
-    base = i * _STRIDE
-    R = [dr.gather(mi.Float, data.seg, base + k, m) for k in range(4)]
-    Z = [dr.gather(mi.Float, data.seg, base + 4 + k, m) for k in range(4)]
-    o, dh = ray.o, ray.dh
-    dz = dh.z
-    W = [Z[0] - o.z] + Z[1:]
-    # F(t) = a W^2 + 2 d_z b W + d_z^2 (c - R^2)      (eqs. 14-15, times d_z^2)
-    W2 = _polymul(W, W)
-    R2 = _polymul(R, R)
-    k1 = 2.0 * dz * ray.b
-    k2 = dz * dz
-    F = [ray.a * W2[k] - k2 * R2[k] for k in range(7)]
-    for k in range(4):
-        F[k] = dr.fma(k1, W[k], F[k])
-    F[0] = dr.fma(k2, ray.c, F[0])
-    # Bound on the size of F's terms on [0, 1]: float32 error scale.
-    sw = dr.abs(W[0]) + dr.abs(W[1]) + dr.abs(W[2]) + dr.abs(W[3])
-    sr = dr.abs(R[0]) + dr.abs(R[1]) + dr.abs(R[2]) + dr.abs(R[3])
-    bound = ray.a * sw * sw + dr.abs(k1) * sw + k2 * (ray.c + sr * sr)
-    tol = _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
+class _Leaf:
+    """A candidate leaf's cubics (local parameter u), its placement in the
+    segment (t = t0 + h u), F in power form and its error bound."""
 
-    lo, hi = mi.Float(-_T_PAD), mi.Float(1.0 + _T_PAD)
-    derivs = [F]
-    for _ in range(5):
-        derivs.append(_polyder(derivs[-1]))
-    crit = _isolate_critical(derivs, lo, hi)
-    xs = [lo] + crit + [hi]
-    fs = [_polyval(F, xk) for xk in xs]
-    steep = k2 >= ray.a
-    inv_dz = dr.rcp(dz)
+    def __init__(self, data: BSplineData, leaf, ray: _Ray, m):
+        base = leaf * (_LEAF_STRIDE // 4)
+        Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
+        Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
+        Rp = dr.gather(mi.Vector4f, data.leaf, base + 2, m)
+        Zp = dr.gather(mi.Vector4f, data.leaf, base + 3, m)
+        meta = dr.gather(mi.Vector4f, data.leaf, base + 4, m)
+        self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
+        self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
+        self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
+        self.Gb, self.tol = _hull(Rb, Zb, ray)
+        # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 14-15, times d_z^2)
+        W = [self.Z[0] - ray.zc] + self.Z[1:]
+        W2 = _polymul(W, W)
+        R2 = _polymul(self.R, self.R)
+        R2[0] = R2[0] - ray.r0sq
+        k2 = ray.dh.z * ray.dh.z
+        self.F = [dr.fma(ray.a, W2[k], -k2 * R2[k]) for k in range(7)]
+        self.dF = _polyder(self.F)
+
+
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_seg, m):
+    """The root of ``F`` on [x0, x1], where it is monotonic (values ``f0``,
+    ``f1`` at the ends), or a tangent root at an end; updates the nearest
+    hit. See the module docstring for the choice of ``s``."""
+    o, dz = ray.o, ray.dh.z
+    tol = lf.tol
+    u, found = _bracket_root(lf.F, lf.dF, x0, x1, f0, f1, _STEPS_ROOT)
+    # No sign change: a tangent (double) root at the endpoint with the
+    # smaller |F|, if that is within float32 noise of 0.
+    fmin = dr.minimum(dr.abs(f0), dr.abs(f1))
+    near0 = dr.abs(f0) <= dr.abs(f1)
+    tangent = ~found & (fmin <= tol)
+    u = dr.select(found, u, dr.select(near0, x0, x1))
+    Rt = _polyval(lf.R, u)
+    Zt = _polyval(lf.Z, u)
+    # A real hit has R(t) >= the ray's distance r0 from the axis. For
+    # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
+    # tangent roots at Z(t) = o_z must be checked against it.
+    ok = m & (found | tangent) & (Rt * Rt >= ray.r0sq * (1.0 - _R0_REL_TOL))
+    # s from eq. 15 for steep rays; else from |o_xy + s d_xy| = R(t),
+    # s = s* -+ h, choosing the branch(es) consistent with z.
+    steep = dz * dz >= ray.a
     inv_a = dr.rcp(dr.maximum(ray.a, 1e-30))
-    # |F| <= tol near a root pair allows |W1 - W2| up to ~2 sqrt(tol / a).
+    s_z = (Zt - o.z) * dr.rcp(dz)
+    hh = dr.sqrt(dr.maximum(dr.fma(Rt, Rt, -ray.r0sq), 0.0) * inv_a)
+    s1 = ray.s_star - hh
+    s2 = ray.s_star + hh
+    e1 = dr.abs(dr.fma(s1, dz, o.z) - Zt)
+    e2 = dr.abs(dr.fma(s2, dz, o.z) - Zt)
+    # A root pair of a nearly horizontal ray that float32 cannot resolve
+    # (a tangent root, or a root next to a critical point where |F| is
+    # within noise) stands for both branches: keep both when both z errors
+    # are within the pair width allowed by the noise of F
+    # (|F| <= tol near a root pair allows |W1 - W2| up to ~2 sqrt(tol / a)).
     z_tol = _PAIR_WIDTH * dr.sqrt(tol * inv_a)
+    both = (tangent | (found & (fmin <= tol))) & (dr.maximum(e1, e2) <= z_tol)
+    cand_a = dr.select(steep, s_z, s1)
+    ok_a = ok & (steep | (e1 <= e2) | both)
+    ok_b = ok & ~steep & ((e2 < e1) | both)
+    t = dr.fma(lf.h, u, lf.t0)
+    for s, oks in ((cand_a, ok_a), (s2, ok_b)):
+        take = oks & (s > ray.lo) & (s < best_s) & dr.isfinite(s)
+        best_s = dr.select(take, s, best_s)
+        best_u = dr.select(take, t, best_u)
+        best_seg = dr.select(take, lf.seg, best_seg)
+    return best_s, best_u, best_seg
+
+
+def _solve_chain(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
+    """General leaf: all critical points of F by the derivative chain, then
+    its six monotonic intervals."""
+    lo, hi = mi.Float(0.0), mi.Float(1.0)
+    derivs = [lf.F, lf.dF]
+    for _ in range(4):
+        derivs.append(_polyder(derivs[-1]))
+    xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
+    fs = [_polyval(lf.F, x) for x in xs]
     for j in range(len(xs) - 1):
-        t, found = _bracket_root(F, derivs[1], xs[j], xs[j + 1], fs[j], fs[j + 1], _STEPS_ROOT)
-        # No sign change: a tangent (double) root at the endpoint with the
-        # smaller |F|, if that is within float32 noise of 0.
-        near0 = dr.abs(fs[j]) <= dr.abs(fs[j + 1])
-        t_tan = dr.select(near0, xs[j], xs[j + 1])
-        tangent = ~found & (dr.minimum(dr.abs(fs[j]), dr.abs(fs[j + 1])) <= tol)
-        t = dr.select(found, t, t_tan)
-        Rt = _polyval(R, t)
-        Zt = _polyval(Z, t)
-        # A real hit has R(t) >= the ray's distance r0 from the axis. For
-        # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
-        # tangent roots at Z(t) = o_z must be checked against it.
-        ok = m & (found | tangent) & (Rt * Rt >= ray.r0sq * (1.0 - _R0_REL_TOL))
-        # s from eq. 15 for steep rays; else from |o_xy + s d_xy| = R(t),
-        # s = s* -+ h, choosing the branch(es) consistent with z.
-        s_z = (Zt - o.z) * inv_dz
-        h = dr.sqrt(dr.maximum(dr.fma(Rt, Rt, -ray.r0sq), 0.0) * inv_a)
-        s1 = ray.s_star - h
-        s2 = ray.s_star + h
-        e1 = dr.abs(dr.fma(s1, dz, o.z) - Zt)
-        e2 = dr.abs(dr.fma(s2, dz, o.z) - Zt)
-        # A root pair of a nearly horizontal ray that float32 cannot resolve
-        # (a tangent root, or a root next to a critical point where |F| is
-        # within noise) stands for both branches: keep both when both z
-        # errors are within the pair width allowed by the noise of F.
-        near_pair = tangent | (found & (dr.minimum(dr.abs(fs[j]), dr.abs(fs[j + 1])) <= tol))
-        both = near_pair & (dr.maximum(e1, e2) <= z_tol)
-        cand_a = dr.select(steep, s_z, s1)
-        ok_a = ok & (steep | (e1 <= e2) | both)
-        ok_b = ok & ~steep & ((e2 < e1) | both)
-        for s, oks in ((cand_a, ok_a), (s2, ok_b)):
-            take = oks & (s > ray.lo) & (s < best_s) & dr.isfinite(s)
-            best_s = dr.select(take, s, best_s)
-            best_u = dr.select(take, t, best_u)
-            best_seg = dr.select(take, i, best_seg)
+        best_s, best_u, best_seg = _take_interval(lf, ray, xs[j], xs[j + 1], fs[j], fs[j + 1],
+                                                  best_s, best_u, best_seg, m)
+    return best_s, best_u, best_seg
+
+
+@dr.syntax
+def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m):
+    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit."""
+    lf = _Leaf(data, leaf, ray, m)
+    # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
+    # first and second differences of those of F, with errors below 2 tol
+    # and 4 tol.
+    Gb = lf.Gb
+    db = [Gb[k + 1] - Gb[k] for k in range(6)]
+    ddb = [db[k + 1] - db[k] for k in range(5)]
+    simple = _one_sign(db, 2.0 * lf.tol) | _one_sign(ddb, 4.0 * lf.tol)
+    # F' or F'' keeps its sign: F has at most one critical point c (none:
+    # c = 1) and at most two roots, on [0, c] and [c, 1].
+    d2 = _polyder(lf.dF)
+    c, _ = _bracket_root(lf.dF, d2, mi.Float(0.0), mi.Float(1.0), lf.dF[0], sum(lf.dF[1:], lf.dF[0]),
+                         _STEPS_CRIT)
+    xs = [mi.Float(0.0), c, mi.Float(1.0)]
+    fs = [lf.F[0], _polyval(lf.F, c), sum(lf.F[1:], lf.F[0])]
+    fast = m & simple
+    for j in range(2):
+        best_s, best_u, best_seg = _take_interval(lf, ray, xs[j], xs[j + 1], fs[j], fs[j + 1],
+                                                  best_s, best_u, best_seg, fast)
+    slow = m & ~simple
+    if slow:
+        best_s, best_u, best_seg = _solve_chain(lf, ray, best_s, best_u, best_seg, slow)
     return best_s, best_u, best_seg
 
 
 @dr.syntax
 def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
     ray, active, shift, dn = _setup(data, o, d, tmax, mi.Bool(active))
-    n = data.n_seg
+    # Threaded BVH copy: lower child first going up, outer child first when
+    # moving towards the axis.
+    copy = dr.select(ray.dh.z >= 0, 0, 2) + dr.select(ray.b <= 0, 0, 1)
+    node = mi.UInt32(copy) * data.n_nodes   # current node
+    end = node + data.n_nodes               # one past this copy's last node
     best_s = mi.Float(ray.hi)   # nearest accepted s so far (shifted frame)
-    best_u = mi.Float(0.0)      # its curve parameter
+    best_u = mi.Float(0.0)      # its curve parameter t
     best_seg = mi.UInt32(0)     # its segment
     hit = mi.Bool(False)        # a hit was found (ends shadow rays)
-    i = mi.UInt32(0)            # next segment to consider
-    while active & (i < n) & ~(hit & shadow):
-        # Skip segments whose annular box the ray misses before best_s.
-        while active & (i < n) & ~_box_pass(data, i, ray, best_s, active & (i < n)):
-            i += 1
-        m = active & (i < n)
+    cand = mi.Bool(False)       # node is a leaf to solve
+    while active & (node < end) & ~(hit & shadow):
+        # Walk the tree to the next candidate leaf.
+        cand = mi.Bool(False)
+        while active & (node < end) & ~cand:
+            cand, node = _visit(data, ray, node, best_s, active & (node < end))
+        leaf = dr.gather(mi.UInt32, data.links, node, cand) & (_LEAF - 1)
         prev = mi.Float(best_s)
-        best_s, best_u, best_seg = _solve_segment(data, i, ray, best_s, best_u, best_seg, m)
+        best_s, best_u, best_seg = _solve_leaf(data, leaf, ray, best_s, best_u, best_seg, cand)
         hit |= best_s < prev
-        i += 1
+        node = dr.select(cand, node + 1, node)
     valid = hit & (best_s < ray.hi)
     if not shadow:
         best_s, best_u = _polish(data, ray, best_s, best_u, best_seg, valid)
