@@ -17,9 +17,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mitsuba as mi
 import numpy as np
 
 from . import bspline as bs
+from .kernels.bspline import (
+    BSplineData,
+    bspline_geometry,
+    build_bspline_data,
+    intersect_bspline,
+    occluded_bspline,
+)
+from .kernels.common import LatheGeometry, LatheHit
+from .kernels.polyline import (
+    PolylineData,
+    build_polyline_data,
+    intersect_polyline,
+    occluded_polyline,
+    polyline_geometry,
+)
 from .profile import Profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
@@ -46,11 +62,9 @@ class PolylineSurface:
         return flat, flat
 
     @property
-    def data(self):
+    def data(self) -> PolylineData:
         """Opaque kernel buffers, built on first use."""
         if self._data is None:
-            from .kernels.polyline import build_polyline_data
-
             p0, p1 = self.profile.segment_points()
             n0, n1 = self._end_normals()
             self._data = build_polyline_data(
@@ -58,19 +72,13 @@ class PolylineSurface:
             )
         return self._data
 
-    def intersect(self, o, d, tmax, active):
-        from .kernels.polyline import intersect_polyline
-
+    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
         return intersect_polyline(self.data, o, d, tmax, active)
 
-    def occluded(self, o, d, tmax, active):
-        from .kernels.polyline import occluded_polyline
-
+    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         return occluded_polyline(self.data, o, d, tmax, active)
 
-    def geometry(self, p, seg, u):
-        from .kernels.polyline import polyline_geometry
-
+    def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return polyline_geometry(self.data, p, seg, u, self.smooth)
 
 
@@ -152,26 +160,19 @@ class BSplineSurface:
         return revolve(points, normals, v, bands, steps)
 
     @property
-    def data(self):
+    def data(self) -> BSplineData:
+        """Opaque kernel buffers, built on first use."""
         if self._data is None:
-            from .kernels.bspline import build_bspline_data
-
             self._data = build_bspline_data(self.profile.segment_controls)
         return self._data
 
-    def intersect(self, o, d, tmax, active):
-        from .kernels.bspline import intersect_bspline
-
+    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
         return intersect_bspline(self.data, o, d, tmax, active)
 
-    def occluded(self, o, d, tmax, active):
-        from .kernels.bspline import occluded_bspline
-
+    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         return occluded_bspline(self.data, o, d, tmax, active)
 
-    def geometry(self, p, seg, u):
-        from .kernels.bspline import bspline_geometry
-
+    def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return bspline_geometry(self.data, p, seg, u)
 
 
