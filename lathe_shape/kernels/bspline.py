@@ -53,23 +53,28 @@ Bernstein coefficients of ``F`` directly, and when all exceed the float32
 error bound ``tol`` in magnitude with one sign (convex hull property), ``F``
 has no root, not even a grazing one, on the leaf. Only the leaves that pass
 (usually the few that the ray really crosses) are solved: an inner loop walks
-the tree to the next such leaf, so all lanes of a SIMD packet solve together.
+the tree to the next such leaf, so all lanes of a SIMD packet solve together
+(the Bernstein test itself is skipped by packets with no lane at an entered
+leaf).
 
 Root finding on a leaf (after C. Yuksel, "High-Performance Polynomial Root
 Finding for Graphics", HPG 2022): the roots of ``F'`` split [0, 1] into
 intervals on which ``F`` is monotonic, so each holds at most one root, and it
 exists exactly when ``F`` changes sign across it. The critical points come
 from the same idea one degree lower, recursively, down to a linear
-polynomial. Leaves are short, so ``F''`` rarely changes sign on one: when its
-5 Bernstein coefficients (second differences of those of ``F``) share a sign
-beyond their error bound, ``F'`` is monotonic, ``F`` has a single critical
-point and at most two roots, and three bracketed searches suffice. Only the
-other lanes run the full derivative chain (five levels, twenty searches),
-inside a symbolic ``if`` that packets without such a lane skip. Each
+polynomial. Leaves are short, so the chain can mostly stop early: when the
+Bernstein coefficients of ``F'`` (first differences of those of ``F``) share
+a sign beyond their error bound, ``F`` is monotonic and one bracketed search
+suffices (most candidate leaves); else when those of ``F''`` (second
+differences) do, ``F`` has a single critical point and at most two roots:
+three searches. Only the remaining lanes (about 1%) run the full derivative
+chain (five levels, twenty searches). The extra work of each case sits in a
+symbolic ``if``, which packets without such a lane skip. Each
 bracketed root is found by safeguarded Newton steps (bisection when a step
 leaves the bracket or converges slowly; the answer is the evaluated point
 with the least ``|F|``), so no root with a sign change can be missed; the
-iteration count only limits precision. A critical point where ``|F|`` is
+iteration count only limits precision; the steps run in a symbolic loop
+that ends once all lanes of a packet converged. A critical point where ``|F|`` is
 below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision (traps.md, float32 cancellation): the ray origin is first moved to
@@ -330,29 +335,36 @@ def _polymul(p: list, q: list) -> list:
     return out
 
 
+@dr.syntax
 def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     """Root of the polynomial ``c`` (derivative ``dc``) on [x0, x1], where it
     is monotonic; ``f0``, ``f1`` are its values at the ends.
 
     Returns ``(x, found)``. ``found``: ``f0`` and ``f1`` differ in sign (or
     one is 0), so exactly one root lies in the bracket. It is refined by
-    safeguarded Newton steps (as ``rtsafe`` in Numerical Recipes): a step
-    that would leave the bracket, or that did not halve the previous one,
-    is replaced by bisection, so the bracket shrinks at least geometrically;
-    the result is the evaluated point with the least ``|f|`` (always inside
-    the bracket). Without a sign change ``x`` is ``x1``
-    (this keeps the list of critical points sorted for the next level).
+    safeguarded Newton steps (as ``rtsafe`` in Numerical Recipes), starting
+    from the false-position point: a step that would leave the bracket, or
+    that did not halve the previous one, is replaced by bisection, so the
+    bracket shrinks at least geometrically; the result is the evaluated
+    point with the least ``|f|`` (always inside the bracket). A symbolic
+    loop of at most ``steps`` iterations ends when every lane of a packet
+    has converged (usually after 2-4 steps on a leaf). Without a sign change
+    ``x`` is ``x1`` (this keeps the list of critical points sorted for the
+    next level).
     """
     found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
     neg0 = f0 < 0
-    a, b = mi.Float(x0), mi.Float(x1)  # bracket; f(a) has the sign of f0
-    x = 0.5 * (a + b)                  # current estimate
+    a = mi.Float(x0)                   # bracket [a, b]; f(a) has the sign of f0
+    b = mi.Float(x1)
+    x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
+    x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
     dx_old = b - a                     # step before last
     dx = mi.Float(dx_old)              # last step
     done = ~found                      # converged (or nothing to find)
     best_x = mi.Float(x)               # evaluated point with the least |f|
-    best_f = mi.Float(dr.inf)
-    for _ in range(steps):
+    best_f = mi.Float(dr.inf)          # its |f|
+    k = mi.UInt32(0)                   # steps taken
+    while ~done & (k < steps):
         f, df = _polyval_d(c, x)
         # Near the root f is float32 noise, and the steps below may then
         # bisect away from it; the least |f| seen is the answer.
@@ -373,6 +385,7 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
         x_new = dr.select(newton, xn, 0.5 * (a + b))
         dx = x_new - x
         x = dr.select(done, x, x_new)
+        k += 1
     x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, best_x))
     return dr.select(found, x, x1), found
 
@@ -415,6 +428,9 @@ class _Ray:
         self.a, self.b, self.c = a, b, c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
         self.s_star, self.r0sq = s_star, r0sq  # closest approach to the axis (xy)
         self.zc = dr.fma(dh.z, s_star, o.z)    # z* = z at the closest approach
+        self.vertical = a <= 1e-12             # parallel to the axis
+        self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
+        self.inv_dz = dr.rcp(dr.select(dh.z == 0, 1e-30, dh.z))
         self.lo, self.hi = lo, hi              # accepted open s-interval (lo, hi)
 
 
@@ -468,15 +484,20 @@ def _setup(data: BSplineData, o, d, tmax, active):
 
 def _box_enter(ray: _Ray, box, best, active):
     """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
-    within (lo, best)."""
-    s0, s1 = _slab(ray.o, ray.dh, ray.a, ray.s_star, ray.r0sq, box.x, box.z, box.w)
-    s0 = dr.maximum(s0, ray.lo)
-    s1 = dr.minimum(s1, best)
+    within (lo, best) (as ``_slab``, with the ray's reciprocals hoisted)."""
+    # z: linear in s (d_z = 0 nudged: the interval is then all or nothing).
+    s1 = (box.z - ray.o.z) * ray.inv_dz
+    s2 = (box.w - ray.o.z) * ray.inv_dz
+    # r(s)^2 = a (s - s*)^2 + r0^2 <= rmax^2: symmetric about s*.
+    disc = dr.fma(box.x, box.x, -ray.r0sq)
+    h = dr.select(ray.vertical, dr.inf, dr.sqrt(dr.maximum(disc, 0.0) * ray.inv_a))
+    s0 = dr.maximum(dr.maximum(dr.minimum(s1, s2), ray.s_star - h), ray.lo)
+    s1 = dr.minimum(dr.minimum(dr.maximum(s1, s2), ray.s_star + h), best)
     # r(s)^2 is convex: its maximum over [s0, s1] is at an endpoint.
     e0 = s0 - ray.s_star
     e1 = s1 - ray.s_star
     r2max = dr.fma(ray.a, dr.maximum(e0 * e0, e1 * e1), ray.r0sq)
-    return active & (s0 <= s1) & (r2max >= box.y)
+    return active & (disc >= 0) & (s0 <= s1) & (r2max >= box.y)
 
 
 def _bezier_square(p: list) -> list:
@@ -515,6 +536,7 @@ def _one_sign(c: list, tol):
     return (lo > tol) | (hi < -tol)
 
 
+@dr.syntax
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
     """One traversal step: ``(candidate, next node)``. A candidate is a leaf
     whose box the ray enters before ``best`` and whose Bernstein hull of
@@ -524,11 +546,13 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
     is_leaf = (link & _LEAF) != 0
     enter = _box_enter(ray, box, best, active)
     m = enter & is_leaf
-    base = (link & (_LEAF - 1)) * (_LEAF_STRIDE // 4)
-    Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
-    Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-    G, tol = _hull(Rb, Zb, ray)
-    cand = m & ~_one_sign(G, tol)
+    cand = mi.Bool(False)  # an entered leaf that F may cross or touch
+    if m:
+        base = (link & (_LEAF - 1)) * (_LEAF_STRIDE // 4)
+        Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
+        Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
+        G, tol = _hull(Rb, Zb, ray)
+        cand = m & ~_one_sign(G, tol)
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
     nxt = dr.select(cand, node, dr.select(is_leaf | enter, node + 1, link))
@@ -637,18 +661,26 @@ def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m)
     Gb = lf.Gb
     db = [Gb[k + 1] - Gb[k] for k in range(6)]
     ddb = [db[k + 1] - db[k] for k in range(5)]
-    simple = _one_sign(db, 2.0 * lf.tol) | _one_sign(ddb, 4.0 * lf.tol)
-    # F' or F'' keeps its sign: F has at most one critical point c (none:
-    # c = 1) and at most two roots, on [0, c] and [c, 1].
-    d2 = _polyder(lf.dF)
-    c, _ = _bracket_root(lf.dF, d2, mi.Float(0.0), mi.Float(1.0), lf.dF[0], sum(lf.dF[1:], lf.dF[0]),
-                         _STEPS_CRIT)
-    xs = [mi.Float(0.0), c, mi.Float(1.0)]
-    fs = [lf.F[0], _polyval(lf.F, c), sum(lf.F[1:], lf.F[0])]
+    mono = _one_sign(db, 2.0 * lf.tol)
+    simple = mono | _one_sign(ddb, 4.0 * lf.tol)
+    # F' keeps its sign: F is monotonic on [0, 1] (most leaves), one
+    # interval. Else F'' keeps its sign: F' is monotonic, F has at most one
+    # critical point c (none: c = 1) and at most two roots, on [0, c] and
+    # [c, 1]; packets without such a lane skip that work.
     fast = m & simple
-    for j in range(2):
-        best_s, best_u, best_seg = _take_interval(lf, ray, xs[j], xs[j + 1], fs[j], fs[j + 1],
-                                                  best_s, best_u, best_seg, fast)
+    split = fast & ~mono
+    c = mi.Float(1.0)            # the critical point (1: none)
+    f_c = sum(lf.F[1:], lf.F[0])  # F(c)
+    if split:
+        c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
+                             sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
+        f_c = _polyval(lf.F, c)
+    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c,
+                                              best_s, best_u, best_seg, fast)
+    if split:
+        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c,
+                                                  sum(lf.F[1:], lf.F[0]),
+                                                  best_s, best_u, best_seg, split)
     slow = m & ~simple
     if slow:
         best_s, best_u, best_seg = _solve_chain(lf, ray, best_s, best_u, best_seg, slow)
