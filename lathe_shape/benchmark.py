@@ -10,7 +10,22 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["best_render_time", "load_with_profile", "points_text"]
+__all__ = ["bench_arguments", "best_render_time", "load_with_profile", "points_text"]
+
+
+def bench_arguments(description: str):
+    """The benchmark scripts' shared options, parsed; selects the variant."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--res", type=int, default=256)
+    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--max-depth", type=int, default=8)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--variant", default="llvm_ad_rgb")
+    args = parser.parse_args()
+    mi.set_variant(args.variant)
+    return args
 
 
 def points_text(points: np.ndarray) -> str:

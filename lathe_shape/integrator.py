@@ -51,6 +51,7 @@ import mitsuba as mi
 
 from .scene_geometry import ExactSceneGeometry
 from .shape import typed_property
+from .variants import register_jit_plugin
 
 __all__ = ["LathePathIntegrator", "NORMAL_CHECKS", "register"]
 
@@ -230,16 +231,6 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         )
 
 
-def _unsupported_variant(props: mi.Properties) -> mi.Integrator:
-    raise RuntimeError(
-        f"lathe_path: Mitsuba variant '{mi.variant()}' is not supported; "
-        "lathe_shape needs a JIT variant such as 'llvm_ad_rgb' or 'cuda_ad_rgb'"
-    )
-
-
 def register() -> None:
     """Register ``<integrator type="lathe_path">`` for the active variant."""
-    if dr.is_jit_v(mi.Float):
-        mi.register_integrator("lathe_path", lambda props: LathePathIntegrator(props))
-    else:
-        mi.register_integrator("lathe_path", _unsupported_variant)
+    register_jit_plugin(mi.register_integrator, "lathe_path", LathePathIntegrator, lambda props: "lathe_path")

@@ -61,6 +61,7 @@ import numpy as np
 
 from .profile import ProfileError, make_profile, parse_profile_string, read_profile_csv
 from .surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_bspline_profile
+from .variants import register_jit_plugin
 
 __all__ = ["LatheShape", "load_surface", "register"]
 
@@ -297,16 +298,6 @@ def _check_transform(matrix: np.ndarray, who: str) -> None:
         raise ValueError(f"{who}: the transform is singular (a zero scale?)")
 
 
-def _unsupported_variant(props: mi.Properties) -> mi.Shape:
-    raise RuntimeError(
-        f"{_describe(props)}: Mitsuba variant '{mi.variant()}' is not supported; "
-        "lathe_shape needs a JIT variant such as 'llvm_ad_rgb' or 'cuda_ad_rgb'"
-    )
-
-
 def register() -> None:
     """Register ``<shape type="lathe">`` for the active variant."""
-    if dr.is_jit_v(mi.Float):
-        mi.register_shape("lathe", lambda props: LatheShape(props))
-    else:
-        mi.register_shape("lathe", _unsupported_variant)
+    register_jit_plugin(mi.register_shape, "lathe", LatheShape, _describe)

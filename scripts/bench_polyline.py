@@ -13,11 +13,12 @@ pays the JIT compilation).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
+
+from lathe_shape.benchmark import bench_arguments, best_render_time, load_with_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,16 +44,7 @@ def goblet_profile(segments: int) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--res", type=int, default=256)
-    parser.add_argument("--spp", type=int, default=16)
-    parser.add_argument("--max-depth", type=int, default=8)
-    parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--variant", default="llvm_ad_rgb")
-    args = parser.parse_args()
-    mi.set_variant(args.variant)
-    import lathe_shape  # noqa: F401
-    from lathe_shape.benchmark import best_render_time, load_with_profile
+    args = bench_arguments(__doc__.splitlines()[0])
     from lathe_shape.shape import LatheShape
 
     defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth)}
