@@ -285,17 +285,30 @@ def main(argv: list[str] | None = None) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
+    # One colour per placement rule across all panels.
+    rules = sorted({rule for table in results.values() for rule in table})
+    colours = {rule: f"C{k}" for k, rule in enumerate(rules)}
     fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 3.8))
     for ax, (obj, table) in zip(np.atleast_1d(axes), results.items(), strict=True):
         for rule, rows in table.items():
             rows = sorted(rows)
-            ax.loglog([r[0] for r in rows], [r[1] for r in rows], "o-", ms=3, label=rule)
+            ax.loglog([r[0] for r in rows], [r[1] for r in rows], "o-", ms=3, label=rule,
+                      color=colours[rule])
         ax.set_title(obj, fontsize=9)
         ax.set_xlabel("polyline segments")
         ax.grid(True, which="both", alpha=0.3)
+        # Ticks at the segment counts rendered (a few, to stay readable).
+        ticks: list[int] = []
+        for n in sorted({r[0] for rows in table.values() for r in rows}):
+            if not ticks or n >= 1.15 * ticks[-1]:
+                ticks.append(n)
+        ax.set_xticks(ticks)
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.legend(fontsize=8)
     np.atleast_1d(axes)[0].set_ylabel("relative mean abs image error")
-    np.atleast_1d(axes)[0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(args.out / "open_problems.png", dpi=110)
     print(f"wrote {args.out / 'open_problems.png'}, {args.out / 'open_problems.txt'} "
