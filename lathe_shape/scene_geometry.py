@@ -28,6 +28,8 @@ class ExactSceneGeometry:
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = [s for s in shapes if isinstance(s, LatheShape)]
         others = [s for s in shapes if not isinstance(s, LatheShape)]
+        if any(s.class_name() == "Instance" for s in others):
+            self._refuse_instanced_lathes(scene)
         if not self.lathes:
             self.rest = scene
         else:
@@ -40,6 +42,21 @@ class ExactSceneGeometry:
             # their ids so that mi.traverse(scene) keeps the user's names.
             for shape, name in zip(others, ids, strict=True):
                 shape.set_id(name)
+
+    def _refuse_instanced_lathes(self, scene: mi.Scene) -> None:
+        """Lathes inside a <shapegroup> are only reached through Mitsuba's
+        instances, which cannot call the exact kernel: say so instead of
+        silently rendering their reference mesh."""
+        direct = {lathe.ptr for lathe in self.lathes}
+        params = mi.traverse(scene)
+        for key in params.keys():
+            node = params.properties[key][2]
+            if isinstance(node, LatheShape) and node.ptr not in direct:
+                raise RuntimeError(
+                    f"lathe_path: lathe '{node.id()}' is inside a <shapegroup>; instanced lathes "
+                    "cannot be intersected exactly. Place it in the scene directly (several "
+                    "lathes with their own to_world), or render the scene with a stock integrator."
+                )
 
     @staticmethod
     def scene_fingerprint(scene: mi.Scene) -> tuple:

@@ -17,6 +17,7 @@ __all__ = [
     "open_scene",
     "parse_defines",
     "parse_resolution",
+    "root_message",
     "scene_integrator",
 ]
 
@@ -66,6 +67,14 @@ def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
             node.tag = "integer"
             node.set("value", str(value))
     return ET.tostring(root, encoding="unicode")
+
+
+def root_message(error: BaseException) -> str:
+    """The innermost cause's message: ``mi.render`` wraps an integrator's
+    error in Dr.Jit's "error while performing a custom ... operation"."""
+    while error.__cause__ is not None:
+        error = error.__cause__
+    return str(error)
 
 
 def scene_integrator(scene: mi.Scene) -> mi.Integrator:

@@ -13,6 +13,7 @@ from conftest import SCENES
 from lathe_shape.furnace import furnace_scene, glass_mask, run_furnace
 from lathe_shape.integrator import LathePathIntegrator
 from lathe_shape.scene_geometry import ExactSceneGeometry
+from lathe_shape.scene_io import root_message
 from lathe_shape.shape import LatheShape
 
 
@@ -252,3 +253,18 @@ def test_unsupported_variant_message():
             mi.load_dict({"type": "lathe_path"})
     finally:
         mi.set_variant(original)
+
+
+def test_instanced_lathe_is_refused_clearly():
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "grp": {"type": "shapegroup", "g": {"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1"}},
+        "inst": {"type": "instance", "shapegroup": {"type": "ref", "id": "grp"}},
+    })
+    with pytest.raises(RuntimeError) as info:
+        mi.render(scene, integrator=mi.load_dict({"type": "lathe_path"}))
+    # mi.render wraps the integrator's error; the message is its cause.
+    assert "lathe 'g' is inside a <shapegroup>; instanced lathes" in root_message(info.value)
+    # Stock integrators still render the instanced reference mesh.
+    assert np.isfinite(mi.render(scene, integrator=mi.load_dict({"type": "path"})).numpy()).all()

@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, check_output_folder, open_scene
+    from ..scene_io import SceneError, check_output_folder, open_scene, root_message
 
     def fail(message: str) -> int:
         print(f"lathe-compare: error: {message}", file=sys.stderr)
@@ -167,7 +167,10 @@ def main(argv: list[str] | None = None) -> int:
     runs = (("exact", "lathe_path", exact_integrator), ("mesh", "path", mesh_integrator))
     for name, kind, integrator in runs:
         start = time.perf_counter()
-        rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
+        try:
+            rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
+        except RuntimeError as e:
+            return fail(root_message(e))
         elapsed = time.perf_counter() - start
         images[name] = rgb
         metadata = {"spp": int(spp), "integrator": kind, "seed": int(args.seed),

@@ -41,7 +41,14 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, check_output_folder, integrator_name, open_scene, scene_integrator
+    from ..scene_io import (
+        SceneError,
+        check_output_folder,
+        integrator_name,
+        open_scene,
+        root_message,
+        scene_integrator,
+    )
 
     def fail(message: str) -> int:
         print(f"lathe-render: error: {message}", file=sys.stderr)
@@ -70,8 +77,10 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     start = time.perf_counter()
-    image = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator)
-    rgb = image.numpy()
+    try:
+        rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
+    except RuntimeError as e:
+        return fail(root_message(e))
     elapsed = time.perf_counter() - start
 
     metadata = {

@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
 
-    from ..scene_io import SceneError, open_scene
+    from ..scene_io import SceneError, open_scene, root_message
     from ..turntable import (
         JOB_KEYS,
         Frame,
@@ -222,9 +222,9 @@ def _run(args: argparse.Namespace) -> int:
             rendered += 1
             progress.advance(seconds)
     except (KeyboardInterrupt, RuntimeError) as e:
-        if not _is_interrupt(e):
-            raise
         progress.close()
+        if not _is_interrupt(e):
+            return fail(root_message(e))
         print(
             f"lathe-turntable: interrupted after {rendered} rendered frame(s); "
             "run the same command again to resume",
