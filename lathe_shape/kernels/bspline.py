@@ -91,7 +91,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..bspline import power_coefficients
-from .common import LatheGeometry, LatheHit
+from .common import LEAF, LatheGeometry, LatheHit, threaded_bvh
 
 __all__ = [
     "BSplineData",
@@ -111,9 +111,6 @@ _STRIDE = 8
 #: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
 #: the leaf's parameter u), then (t0, h, segment, 0).
 _LEAF_STRIDE = 20
-
-#: Flag bit of a leaf's link word (low bits: leaf index).
-_LEAF = 0x80000000
 
 #: Longest leaf, in segment parameter t (before padding).
 _LEAF_T = 0.25
@@ -151,7 +148,7 @@ class BSplineData:
         nodes: ``mi.Float``, 4 values per node of the four threaded BVH
             copies: the annular box ``(rmax, rmin^2, zmin, zmax)``.
         links: ``mi.UInt32`` per node: an inner node's miss link, or
-            ``_LEAF | leaf index``.
+            ``LEAF | leaf index``.
         n_nodes: opaque ``mi.UInt32``: nodes per copy.
         n_seg: opaque ``mi.UInt32`` (one element): number of segments.
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
@@ -215,41 +212,6 @@ def _bezier(p: np.ndarray) -> np.ndarray:
     return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
 
 
-def _build_tree(box: np.ndarray, idx: np.ndarray):
-    """Median-split BVH over leaf boxes ``(rmin, rmax, zmin, zmax)``:
-    ``('leaf', k, box)`` or ``('node', box, axis, lower, upper)``."""
-    b = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
-    if len(idx) == 1:
-        return ('leaf', int(idx[0]), b)
-    cr = 0.5 * (box[idx, 0] + box[idx, 1])
-    cz = 0.5 * (box[idx, 2] + box[idx, 3])
-    axis = 0 if np.ptp(cr) > np.ptp(cz) else 1
-    order = idx[np.argsort(cr if axis == 0 else cz, kind='stable')]
-    half = len(order) // 2
-    return ('node', b, axis, _build_tree(box, order[:half]), _build_tree(box, order[half:]))
-
-
-def _thread(tree, z_up: bool, r_out: bool, recs: list, links: list) -> None:
-    """Append ``tree`` in pre-order with miss links (global indices).
-    ``z_up``: lower child of a z split first; ``r_out``: outer child of an
-    r split first."""
-    if tree[0] == 'leaf':
-        rmin, rmax, zmin, zmax = tree[2]
-        recs.append([rmax, rmin * rmin, zmin, zmax])
-        links.append(_LEAF | tree[1])
-        return
-    _, (rmin, rmax, zmin, zmax), axis, lower, upper = tree
-    first, second = lower, upper
-    if (axis == 1 and not z_up) or (axis == 0 and r_out):
-        first, second = upper, lower
-    me = len(recs)
-    recs.append([rmax, rmin * rmin, zmin, zmax])
-    links.append(0)
-    _thread(first, z_up, r_out, recs, links)
-    _thread(second, z_up, r_out, recs, links)
-    links[me] = len(recs)
-
-
 def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
     """Pack validated per-segment control points (from
     :func:`lathe_shape.bspline.bspline_segments`, oriented clockwise) into
@@ -273,13 +235,11 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
             leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp, [t0, h, i, 0.0]]))
             boxes.append([max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad])
     boxes = np.array(boxes)
-    tree = _build_tree(boxes, np.arange(len(boxes)))
-    recs, links = [], []
-    # Copy index (see _trace): 2 * (d_z < 0) + (moving away from the axis).
-    for z_up, r_out in [(True, True), (True, False), (False, True), (False, False)]:
-        _thread(tree, z_up, r_out, recs, links)
-    n_nodes = 2 * len(boxes) - 1
-    assert len(recs) == 4 * n_nodes
+    # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
+    def record(b):
+        return [b[1], b[0] * b[0], b[2], b[3]]
+
+    recs, links, n_nodes = threaded_bvh(boxes, record, lambda k, b: record(b))
 
     def opaque(value, cls=mi.Float):
         v = cls(value)
@@ -543,12 +503,12 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
     ``F`` does not exclude a root (or a grazing contact)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
     link = dr.gather(mi.UInt32, data.links, node, active)
-    is_leaf = (link & _LEAF) != 0
+    is_leaf = (link & LEAF) != 0
     enter = _box_enter(ray, box, best, active)
     m = enter & is_leaf
     cand = mi.Bool(False)  # an entered leaf that F may cross or touch
     if m:
-        base = (link & (_LEAF - 1)) * (_LEAF_STRIDE // 4)
+        base = (link & (LEAF - 1)) * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
         G, tol = _hull(Rb, Zb, ray)
@@ -705,7 +665,7 @@ def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
         cand = mi.Bool(False)
         while active & (node < end) & ~cand:
             cand, node = _visit(data, ray, node, best_s, active & (node < end))
-        leaf = dr.gather(mi.UInt32, data.links, node, cand) & (_LEAF - 1)
+        leaf = dr.gather(mi.UInt32, data.links, node, cand) & (LEAF - 1)
         prev = mi.Float(best_s)
         best_s, best_u, best_seg = _solve_leaf(data, leaf, ray, best_s, best_u, best_seg, cand)
         hit |= best_s < prev

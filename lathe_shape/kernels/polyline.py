@@ -48,7 +48,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .common import LatheGeometry, LatheHit
+from .common import LEAF, LatheGeometry, LatheHit, threaded_bvh
 
 #: Joint tolerance relative to the profile size (max of r extent, z extent).
 TOL_REL = 1e-5
@@ -56,9 +56,6 @@ TOL_REL = 1e-5
 #: Padding of the BVH boxes and of the bounding cylinder, in units of the
 #: joint tolerance (boxes must contain every hit that a segment accepts).
 _BOX_PAD = 8.0
-
-#: Flag bit in a node's link word marking a leaf (low bits: segment index).
-_LEAF = 0x80000000
 
 #: Floats per node record (two Vector4f gathers).
 _REC = 8
@@ -75,7 +72,7 @@ class PolylineData:
         ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``links``
         UInt32 buffer: the miss link of an inner node, or
-        ``_LEAF | segment index`` for a leaf.
+        ``LEAF | segment index`` for a leaf.
     ``n_nodes``
         Opaque UInt32: nodes per copy.
     ``seg_geo``
@@ -110,51 +107,6 @@ PolylineGeometry = LatheGeometry
 # ---------------------------------------------------------------------------
 # Building the data (numpy, once per profile)
 # ---------------------------------------------------------------------------
-
-def _build_tree(lo_r, hi_r, lo_z, hi_z, idx):
-    """Median-split BVH over segment boxes, as nested tuples.
-
-    Returns ``('leaf', seg)`` or ``('node', box, axis, left, right)`` where
-    ``left`` holds the smaller coordinates along ``axis`` (0: r, 1: z).
-    """
-    box = (lo_r[idx].min(), hi_r[idx].max(), lo_z[idx].min(), hi_z[idx].max())
-    if len(idx) == 1:
-        return ('leaf', int(idx[0]), box)
-    cr = 0.5 * (lo_r[idx] + hi_r[idx])
-    cz = 0.5 * (lo_z[idx] + hi_z[idx])
-    # Split the axis along which the segment centres spread most
-    axis = 0 if np.ptp(cr) > np.ptp(cz) else 1
-    key = cr if axis == 0 else cz
-    order = idx[np.argsort(key, kind='stable')]
-    half = len(order) // 2
-    left = _build_tree(lo_r, hi_r, lo_z, hi_z, order[:half])
-    right = _build_tree(lo_r, hi_r, lo_z, hi_z, order[half:])
-    return ('node', box, axis, left, right)
-
-
-def _thread_tree(tree, z_up: bool, r_out: bool, leaf_rec, recs: list,
-                 links: list) -> None:
-    """Append ``tree`` to ``recs``/``links`` in pre-order with miss links.
-
-    ``z_up``: visit the lower child of a z split first; ``r_out``: visit the
-    outer child of an r split first. Indices are global (into ``recs``).
-    """
-    if tree[0] == 'leaf':
-        recs.append(leaf_rec[tree[1]])
-        links.append(_LEAF | tree[1])
-        return
-    _, (rmin, rmax, zmin, zmax), axis, left, right = tree
-    first, second = left, right
-    if (axis == 1 and not z_up) or (axis == 0 and r_out):
-        first, second = right, left
-    me = len(recs)
-    recs.append([1.0, 0.0, rmax, rmin * rmin, zmin, zmax, 0.0, 0.0])
-    links.append(0)
-    _thread_tree(first, z_up, r_out, leaf_rec, recs, links)
-    _thread_tree(second, z_up, r_out, leaf_rec, recs, links)
-    # Miss link: the next node after this subtree in pre-order
-    links[me] = len(recs)
-
 
 def build_polyline_data(r0, z0, r1, z1, nr0, nz0, nr1, nz1) -> PolylineData:
     """Pack a polyline profile into opaque Dr.Jit buffers.
@@ -197,16 +149,12 @@ def build_polyline_data(r0, z0, r1, z1, nr0, nz0, nr1, nz1) -> PolylineData:
     hi_r = np.maximum(r0, r1) + pad
     lo_z = np.minimum(z0, z1) - pad
     hi_z = np.maximum(z0, z1) + pad
-    tree = _build_tree(lo_r, hi_r, lo_z, hi_z, np.arange(n_seg))
-
-    recs, links = [], []
-    n_nodes = 2 * n_seg - 1
-    # Four copies, in the order of the copy index used by _Ray:
-    # 2 * (d_z < 0) + (ray moving away from the axis)
-    for z_up, r_out in [(True, True), (True, False), (False, True),
-                        (False, False)]:
-        _thread_tree(tree, z_up, r_out, leaf_rec, recs, links)
-    assert len(recs) == 4 * n_nodes
+    recs, links, n_nodes = threaded_bvh(
+        np.stack([lo_r, hi_r, lo_z, hi_z], axis=1),
+        # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
+        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3], 0.0, 0.0],
+        lambda k, b: leaf_rec[k],
+    )
 
     arc = np.concatenate([[0.0], np.cumsum(length)])
     total = float(arc[-1])
@@ -327,7 +275,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
     rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
     link = dr.gather(mi.UInt32, data.links, node, active)
-    is_leaf = (link & _LEAF) != 0
+    is_leaf = (link & LEAF) != 0
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     o, d = ray.o, ray.d
 
@@ -392,7 +340,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     hit = active & is_leaf & (ok1 | ok2)
 
     next_node = dr.select(~is_leaf & ~box_hit, link, node + 1)
-    return next_node, s_hit, u_hit, link & ~mi.UInt32(_LEAF), hit
+    return next_node, s_hit, u_hit, link & ~mi.UInt32(LEAF), hit
 
 
 # ---------------------------------------------------------------------------
