@@ -10,6 +10,8 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
+from .scene_io import load_string_in
+
 __all__ = ["bench_arguments", "best_render_time", "load_with_profile", "points_text"]
 
 
@@ -40,13 +42,7 @@ def load_with_profile(scene_file: str | Path, points: np.ndarray, kind: str = "p
     scene_file = Path(scene_file)
     shape = f'<string name="profile" value="{points_text(points)}"/><string name="kind" value="{kind}"/>'
     text = re.sub(r'<string name="filename" value="[^"]*"/>', shape, scene_file.read_text())
-    resolver = mi.file_resolver()
-    saved = mi.FileResolver(resolver)
-    resolver.prepend(str(scene_file.parent))
-    try:
-        return mi.load_string(text, **defines)
-    finally:
-        mi.set_file_resolver(saved)
+    return load_string_in(scene_file.parent, text, **defines)
 
 
 def best_render_time(scene: mi.Scene, integrator: mi.Integrator, spp: int,

@@ -62,9 +62,8 @@ class ExactSceneGeometry:
     def scene_fingerprint(scene: mi.Scene) -> tuple:
         """Identity and bounds of every shape: changes when the scene is
         another one, or when shapes are moved or edited (mi.traverse)."""
-        return tuple(
-            (shape.ptr, tuple(shape.bbox().min), tuple(shape.bbox().max)) for shape in scene.shapes()
-        )
+        boxes = ((shape.ptr, shape.bbox()) for shape in scene.shapes())
+        return tuple((ptr, tuple(box.min), tuple(box.max)) for ptr, box in boxes)
 
     def matches(self, scene: mi.Scene) -> bool:
         """Whether this geometry is still valid for ``scene``."""

@@ -14,6 +14,7 @@ __all__ = [
     "check_output_folder",
     "integrator_name",
     "load_scene",
+    "load_string_in",
     "open_scene",
     "parse_defines",
     "parse_resolution",
@@ -94,6 +95,18 @@ def integrator_name(integrator: mi.Integrator) -> str:
     return integrator.class_name()
 
 
+def load_string_in(folder: str | os.PathLike, text: str, **defines: str) -> mi.Scene:
+    """``mi.load_string`` with relative file names (profiles, textures)
+    resolved in ``folder``, as if ``text`` were a file there."""
+    resolver = mi.file_resolver()
+    saved = mi.FileResolver(resolver)
+    resolver.prepend(os.path.abspath(os.fspath(folder)))
+    try:
+        return mi.load_string(text, **defines)
+    finally:
+        mi.set_file_resolver(saved)
+
+
 def _without_traceback(message: str) -> str:
     """Mitsuba embeds a Python plugin's traceback in its error; keep the
     location line and the exception's own line."""
@@ -123,13 +136,7 @@ def load_scene(
         else:
             with open(path, encoding="utf-8") as f:
                 text = _override_film_size(f.read(), path, resolution)
-            resolver = mi.file_resolver()
-            saved = mi.FileResolver(resolver)
-            resolver.prepend(os.path.dirname(os.path.abspath(path)))
-            try:
-                scene = mi.load_string(text, **defines)
-            finally:
-                mi.set_file_resolver(saved)
+            scene = load_string_in(os.path.dirname(os.path.abspath(path)), text, **defines)
     except SceneError:
         raise
     except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError

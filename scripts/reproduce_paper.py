@@ -253,7 +253,7 @@ def render(path: Path, res: int, spp: int, seed: int, max_depth: int | None = No
     renders once first so the time excludes JIT compilation."""
     import mitsuba as mi
 
-    from lathe_shape.scene_io import load_scene
+    from lathe_shape.scene_io import load_scene, load_string_in
 
     defines = {"res": str(res), "spp": str(spp)}
     if max_depth is not None:
@@ -266,13 +266,7 @@ def render(path: Path, res: int, spp: int, seed: int, max_depth: int | None = No
         old = old[:old.index("/>") + 2]
         text = text.replace(old, f'<string name="filename" value="{filename}"/>')
         text = text.replace('<string name="kind" value="bspline"/>', "")
-        resolver = mi.file_resolver()
-        saved = mi.FileResolver(resolver)
-        resolver.prepend(str(path.parent))
-        try:
-            scene = mi.load_string(text, **defines)
-        finally:
-            mi.set_file_resolver(saved)
+        scene = load_string_in(path.parent, text, **defines)
     depth = max_depth if max_depth is not None else scene_max_depth(scene)
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": depth, "normal_check": "none"})
     if warm:

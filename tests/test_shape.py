@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import SCENE_FILES
 
+from lathe_shape.scene_io import load_string_in
 from lathe_shape.shape import LatheShape
 
 GLASS = "0 0, 1 0, 1 2, 0.9 2, 0.9 0.1, 0 0.1"
@@ -97,14 +98,8 @@ def test_scene_renders_with_stock_path(scene_file):
     text = scene_file.read_text()
     without = re.sub(r'<shape type="lathe".*?</shape>', "", text, flags=re.S)
     assert without != text
-    resolver = mi.file_resolver()
-    saved = mi.FileResolver(resolver)
-    resolver.prepend(str(scene_file.parent))
-    try:
-        no_mesh = {k: v for k, v in small.items() if k != "mesh_segments"}
-        scene_empty = mi.load_string(without, **no_mesh)
-    finally:
-        mi.set_file_resolver(saved)
+    no_mesh = {k: v for k, v in small.items() if k != "mesh_segments"}
+    scene_empty = load_string_in(scene_file.parent, without, **no_mesh)
     empty = np.array(mi.render(scene_empty, seed=1))
     changed = np.abs(image - empty).max(axis=2) > 0.05
     assert changed.mean() > 0.02
