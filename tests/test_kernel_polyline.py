@@ -278,13 +278,18 @@ def test_traceable_in_outer_loop():
     dr.eval(o, d)
     count = _count_hits(make_data(prof), o, d).numpy()
     assert count.max() >= 2
-    # Warm up once more (the first launches in a process may differ), then
-    # other profiles, even of another size, must reuse the cached kernel
-    _count_hits(make_data(ref.star_profile(rng, 7)), o, d).numpy()
+    # Other profiles, even of another size, must launch the very kernels of
+    # the first run (same IR hash): the data is opaque, not baked in. Hashes
+    # are compared rather than Dr.Jit's cache_hit flags, which depend on
+    # the state of the on-disk kernel cache.
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history()
+        _count_hits(make_data(ref.star_profile(rng, 7)), o, d).numpy()
+        first = {k['hash'] for k in dr.kernel_history() if k['type'] == dr.KernelType.JIT}
+    assert first
     for other in (ref.star_profile(rng, 7), ref.ring_profile()):
         with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
             dr.kernel_history()
             _count_hits(make_data(other), o, d).numpy()
-            hist = [k for k in dr.kernel_history()
-                    if k['type'] == dr.KernelType.JIT]
-        assert hist and all(k['cache_hit'] for k in hist)
+            hashes = {k['hash'] for k in dr.kernel_history() if k['type'] == dr.KernelType.JIT}
+        assert hashes and hashes <= first
