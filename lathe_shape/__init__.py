@@ -18,7 +18,7 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from .profile import Profile, ProfileError, make_profile
+from .profiles.polyline import Profile, ProfileError, make_profile
 
 __all__ = [
     "MIN_LLVM_VERSION",
@@ -63,8 +63,8 @@ def register(variant: str | None = None) -> None:
     if variant is None:
         return
     check_llvm(variant)
-    from .integrator import register as register_integrator
-    from .shape import register as register_shape
+    from .plugin.lathe_path import register as register_integrator
+    from .plugin.shape import register as register_shape
 
     register_shape()
     register_integrator()

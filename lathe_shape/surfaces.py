@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import mitsuba as mi
 import numpy as np
 
-from . import bspline as bs
 from .kernels.bspline import (
     BSplineData,
     bspline_geometry,
@@ -36,7 +35,8 @@ from .kernels.polyline import (
     occluded_polyline,
     polyline_geometry,
 )
-from .profile import Profile
+from .profiles import bspline as bs
+from .profiles.polyline import Profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
 __all__ = ["PolylineSurface", "BSplineProfile", "BSplineSurface", "SURFACE_KINDS"]
@@ -105,7 +105,7 @@ class BSplineProfile:
 
 
 def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
-    """Validate B-spline control points (see :mod:`lathe_shape.bspline`) and
+    """Validate B-spline control points (see :mod:`lathe_shape.profiles.bspline`) and
     orient them clockwise."""
     points = bs.orient_clockwise(np.asarray(points, dtype=np.float64), source)
     closed = bs.is_closed(points)

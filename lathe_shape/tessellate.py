@@ -113,7 +113,7 @@ def revolve(
 
 
 def tessellate_profile(profile, azimuth_steps: int, smooth: bool = True) -> TriangleMesh:
-    """Tessellate a :class:`lathe_shape.profile.Profile`.
+    """Tessellate a :class:`lathe_shape.profiles.polyline.Profile`.
 
     With ``smooth`` the vertex normals are the profile's crease-aware shading
     normals; without, every segment gets its flat geometric normal. The

@@ -70,7 +70,7 @@ def camera_rays(seg: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def surface_rays(seg: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
-    from lathe_shape import bspline as B
+    from lathe_shape.profiles import bspline as B
     T = rng.uniform(0, len(seg), n)
     i = np.minimum(T.astype(int), len(seg) - 1)
     r, z = B.evaluate(seg, i, T - i)
@@ -121,9 +121,9 @@ def main() -> None:
     mi.set_variant(args.variant)
     from bench_spline import SPLINE_GLASS
 
-    from lathe_shape.bspline import to_polyline
     from lathe_shape.kernels import polyline as P
-    from lathe_shape.profile import make_profile
+    from lathe_shape.profiles.bspline import to_polyline
+    from lathe_shape.profiles.polyline import make_profile
     from lathe_shape.surfaces import make_bspline_profile
 
     K = load_kernel(args.module)

@@ -18,7 +18,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.benchmark import bench_arguments, best_render_time, load_with_profile
+from lathe_shape.tools.bench import bench_arguments, best_render_time, load_with_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,7 +45,7 @@ def goblet_profile(segments: int) -> np.ndarray:
 
 def main() -> None:
     args = bench_arguments(__doc__.splitlines()[0])
-    from lathe_shape.shape import LatheShape
+    from lathe_shape.plugin.shape import LatheShape
 
     defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth)}
     path_int = mi.load_dict({"type": "path", "max_depth": args.max_depth})

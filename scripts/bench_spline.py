@@ -17,7 +17,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.benchmark import bench_arguments, best_render_time, load_with_profile
+from lathe_shape.tools.bench import bench_arguments, best_render_time, load_with_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS_SCENE = ROOT / "scenes" / "wine_glass.xml"
@@ -32,7 +32,7 @@ SPLINE_GLASS = np.array([
 
 def main() -> None:
     args = bench_arguments(__doc__.splitlines()[0])
-    from lathe_shape.bspline import to_polyline
+    from lathe_shape.profiles.bspline import to_polyline
     from lathe_shape.surfaces import make_bspline_profile
 
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")

@@ -22,8 +22,8 @@ def main() -> None:
     parser.add_argument("--variant", default="llvm_ad_rgb")
     args = parser.parse_args()
     mi.set_variant(args.variant)
-    from lathe_shape.furnace import furnace_scene, run_furnace
-    from lathe_shape.integrator import NORMAL_CHECKS
+    from lathe_shape.plugin.lathe_path import NORMAL_CHECKS
+    from lathe_shape.tools.furnace import furnace_scene, run_furnace
 
     scene = furnace_scene(resolution=args.res)
     print(f"furnace: {args.res}x{args.res}, {args.spp} spp, max_depth -1, dielectric int_ior 1.5")

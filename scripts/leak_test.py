@@ -3,7 +3,7 @@
 Rays start outside several random closed profiles (near and far, aimed at
 random points near the object, through the axis, and exactly at profile
 vertices, the hardest case). Each ray is followed through all its hits
-(restarting past every hit, see ``tests/polyline_reference.crossing_leaks``)
+(restarting past every hit, see ``lathe_shape.tools.reference.crossing_leaks``)
 and flagged as a leak when it changes sides of the surface without a
 reported hit. Prints the leak count and rate.
 
@@ -24,9 +24,8 @@ _ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(_ROOT))
 sys.path.insert(0, str(_ROOT / 'tests'))
 
-import polyline_reference as ref  # noqa: E402
-
 from lathe_shape.kernels.polyline import build_polyline_data, intersect_polyline, polyline_geometry  # noqa: E402
+from lathe_shape.tools import reference as ref  # noqa: E402
 
 
 def kernel_callback(data):

@@ -20,7 +20,7 @@ from straight lines and circular arcs:
   ones a glass maker makes on purpose: they carry ``sharp = 1`` (foot rim
   corners, the flat-cut lip of the bottle).
 
-Output format (read by ``lathe_shape.profile``): header ``r,z,sharp``, one
+Output format (read by ``lathe_shape.profiles.polyline``): header ``r,z,sharp``, one
 vertex per line, ``#`` comments. Both ends of every profile lie on the axis
 (r = 0), which closes it. Points run clockwise in the (r right, z up) plane,
 i.e. the glass is on the right-hand side when walking along the profile (the

@@ -13,7 +13,7 @@ relative mean absolute difference to the exact object rendered with the
 *same* seed and spp (the noise is correlated, so the difference is the
 geometry's). Rules: ``uniform`` (equal steps of the spline parameter for the
 B-spline, equal arc length for the arc objects: no care), ``adaptive``
-(:func:`lathe_shape.bspline.to_polyline` ``'adaptive'``: equal turning angle),
+(:func:`lathe_shape.profiles.bspline.to_polyline` ``'adaptive'``: equal turning angle),
 ``arc-equal`` (the arc objects' own arcs divided equally, method.md section
 2.3), and the two rules of (b).
 
@@ -57,7 +57,7 @@ import reproduce_paper as rp  # noqa: E402
 def dense_bspline(per_segment: int = 512) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dense points of the fig. 8b curve, their global parameter T, and the
     indices of the segment joints (T integer)."""
-    from lathe_shape import bspline as B
+    from lathe_shape.profiles import bspline as B
 
     seg = B.bspline_segments(rp.GLASS_BSPLINE, "glass")
     T = np.linspace(0.0, len(seg), len(seg) * per_segment + 1)
@@ -71,7 +71,7 @@ def dense_bspline(per_segment: int = 512) -> tuple[np.ndarray, np.ndarray, np.nd
 def dense_arcs(spec: dict, max_chord: float = 0.02) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Dense points of an arc object (arcs at 0.5 degrees, lines cut into
     pieces <= max_chord), sharp flags, and the indices of the arc joints."""
-    from lathe_shape.arc_profile import build_from_spec
+    from lathe_shape.profiles.arcs import build_from_spec
 
     fine = rp.fine_spec(spec, 0.5)
     pts, sharp = build_from_spec(fine)
@@ -157,7 +157,7 @@ def rule_greedy(s: np.ndarray, th: np.ndarray, n_seg: int, start: np.ndarray) ->
 
 
 def write_csv(folder: Path, name: str, pts: np.ndarray, sharp: np.ndarray | None = None) -> str:
-    from lathe_shape.arc_profile import profile_to_csv
+    from lathe_shape.profiles.arcs import profile_to_csv
 
     sharp = np.zeros(len(pts), bool) if sharp is None else sharp
     path = folder / f"{name}.csv"
@@ -178,8 +178,8 @@ def main(argv: list[str] | None = None) -> int:
 
     mi.set_variant(args.variant)
     import lathe_shape  # noqa: F401
-    from lathe_shape import bspline as B
-    from lathe_shape.arc_profile import build_from_spec
+    from lathe_shape.profiles import bspline as B
+    from lathe_shape.profiles.arcs import build_from_spec
 
     res = args.res or (32 if args.quick else 128)
     spp = args.spp or (2 if args.quick else 16)

@@ -28,7 +28,7 @@ polyline distorts the checkered floor) into ``--out``.
 The profiles: fig. 8b's glass is a hand-placed open B-spline (11 control
 points, 12 segments); fig. 8a samples it uniformly in the spline parameter
 (32 points, 31 segments, no care); fig. 9 is a wine glass built with
-:mod:`lathe_shape.arc_profile` (arcs divided equally, concentric inner wall,
+:mod:`lathe_shape.profiles.arcs` (arcs divided equally, concentric inner wall,
 42 segments), 10a a sundae cup (58) and 10b a brandy bottle (86), built the
 same way. ``--make`` rewrites them (deterministic).
 """
@@ -54,7 +54,7 @@ sys.path.insert(0, str(ROOT))
 # ---------------------------------------------------------------------------
 
 #: Fig. 8b: open uniform cubic B-spline, 11 control points -> 12 segments
-#: (both ends on the axis, ends tripled; see lathe_shape.bspline). Foot,
+#: (both ends on the axis, ends tripled; see lathe_shape.profiles.bspline). Foot,
 #: stem, bowl, rim, inner wall, inner bottom.
 GLASS_BSPLINE = np.array([
     [0.0, 0.0], [3.7, 0.0], [3.6, 0.55], [0.4, 0.45], [0.3, 6.2], [5.7, 6.9],
@@ -172,8 +172,8 @@ PAPER_TIMES = {"fig8a": "1 min 40 s", "fig8b": "31 min", "fig9": "-", "fig10a": 
 
 def write_profiles(folder: Path = PAPER) -> None:
     """Write the profile files of scenes/paper (deterministic)."""
-    from lathe_shape import bspline as B
-    from lathe_shape.arc_profile import build_from_spec, profile_to_csv
+    from lathe_shape.profiles import bspline as B
+    from lathe_shape.profiles.arcs import build_from_spec, profile_to_csv
 
     folder.mkdir(parents=True, exist_ok=True)
     for name, make in SPECS.items():
@@ -253,7 +253,7 @@ def render(path: Path, res: int, spp: int, seed: int, max_depth: int | None = No
     renders once first so the time excludes JIT compilation."""
     import mitsuba as mi
 
-    from lathe_shape.scene_io import load_scene, load_string_in
+    from lathe_shape.tools.scenes import load_scene, load_string_in
 
     defines = {"res": str(res), "spp": str(spp)}
     if max_depth is not None:
@@ -306,7 +306,7 @@ def write_sheet(path: Path, images: list[tuple[str, np.ndarray]],
     as fractions of the image) below, labelled."""
     from PIL import Image, ImageDraw
 
-    from lathe_shape.imageio import to_srgb8
+    from lathe_shape.tools.images import to_srgb8
 
     tiles = []
     for label, rgb in images:
@@ -344,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
 
     mi.set_variant(args.variant)
     import lathe_shape  # noqa: F401  (registers the plugins)
-    from lathe_shape.imageio import write_exr, write_png
+    from lathe_shape.tools.images import write_exr, write_png
 
     if args.make:
         write_profiles()

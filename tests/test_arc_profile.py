@@ -1,4 +1,4 @@
-"""Tests of the section 2.3 arc profile builder (lathe_shape.arc_profile):
+"""Tests of the section 2.3 arc profile builder (lathe_shape.profiles.arcs):
 constant wall thickness, equal division, validity, spec files and errors."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from lathe_shape.arc_profile import ArcPiece, build_from_spec, load_profile_spec
-from lathe_shape.profile import ProfileError, make_profile
+from lathe_shape.profiles.arcs import ArcPiece, build_from_spec, load_profile_spec
+from lathe_shape.profiles.polyline import ProfileError, make_profile
 
 #: A goblet: foot, stem, fillet, spherical bowl (centre on the axis), upper arc.
 SPEC = {
@@ -35,7 +35,7 @@ SPEC = {
 
 def _wall_pieces(spec):
     """Outer and inner arc pieces, rebuilt with the builder internals."""
-    from lathe_shape import arc_profile as A
+    from lathe_shape.profiles import arcs as A
 
     b = A.ArcProfileBuilder(spec["start"], 0.0, spec["max_step_deg"])
     for e in spec["base"]:

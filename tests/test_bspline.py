@@ -1,4 +1,4 @@
-"""Tests of the B-spline profile math (lathe_shape.bspline) and of the exact
+"""Tests of the B-spline profile math (lathe_shape.profiles.bspline) and of the exact
 Dr.Jit intersection kernel (lathe_shape.kernels.bspline).
 
 The kernel is checked against an independent float64 reference: the sextic
@@ -18,7 +18,7 @@ import pytest
 mi = pytest.importorskip("mitsuba")
 dr = pytest.importorskip("drjit")
 
-from lathe_shape import bspline as B  # noqa: E402
+from lathe_shape.profiles import bspline as B  # noqa: E402
 
 #: A glass-wall ring (closed periodic B-spline): thick base, thin wall, rim.
 RING = np.array([[1.0, 0.0], [1.2, 0.0], [1.2, 1.5], [1.1, 2.0], [1.0, 1.5],
@@ -42,7 +42,7 @@ def kernels():
 
 
 # ---------------------------------------------------------------------------
-# lathe_shape.bspline
+# lathe_shape.profiles.bspline
 # ---------------------------------------------------------------------------
 
 def test_closed_form_wraps():

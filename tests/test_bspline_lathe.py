@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from test_tessellate import assert_watertight
 
-from lathe_shape.bspline import evaluate, to_polyline
-from lathe_shape.shape import LatheShape
+from lathe_shape.plugin.shape import LatheShape
+from lathe_shape.profiles.bspline import evaluate, to_polyline
 
 #: An open B-spline goblet (ends on the axis) and a closed periodic ring.
 GOBLET = "0 0, 1.6 0, 0.2 0.2, 0.2 2.0, 0.3 3.2, 2.2 3.9, 1.8 7.2, 1.7 7.2, 2.0 4.2, 0.4 3.4, 0 3.4"

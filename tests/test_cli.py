@@ -8,7 +8,7 @@ import sys
 import numpy as np
 from conftest import SCENES
 
-from lathe_shape.imageio import read_exr
+from lathe_shape.tools.images import read_exr
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:

@@ -34,7 +34,7 @@ def test_reproduce_paper_quick(tmp_path):
 
 def test_lathe_compare(tmp_path):
     from lathe_shape.cli.compare import main
-    from lathe_shape.imageio import read_exr
+    from lathe_shape.tools.images import read_exr
 
     out = tmp_path / "cmp"
     rc = main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "-o", str(out), "--spp", "2",

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest import SCENE_FILES
 
-from lathe_shape.scene_io import load_string_in
-from lathe_shape.shape import LatheShape
+from lathe_shape.plugin.shape import LatheShape
+from lathe_shape.tools.scenes import load_string_in
 
 GLASS = "0 0, 1 0, 1 2, 0.9 2, 0.9 0.1, 0 0.1"
 

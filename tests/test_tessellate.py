@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import SCENES, random_ring_profile, random_vase_profile
 
-from lathe_shape.profile import make_profile, read_profile_csv
+from lathe_shape.profiles.polyline import make_profile, read_profile_csv
 from lathe_shape.tessellate import tessellate_profile
 
 

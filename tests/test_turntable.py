@@ -15,10 +15,10 @@ import OpenEXR
 import pytest
 from conftest import SCENES
 
-from lathe_shape import turntable as tt
 from lathe_shape.cli.turntable import main
-from lathe_shape.imageio import read_exr
-from lathe_shape.scene_io import load_scene
+from lathe_shape.tools import turntable as tt
+from lathe_shape.tools.images import read_exr
+from lathe_shape.tools.scenes import load_scene
 
 WINE = str(SCENES / "wine_glass.xml")
 FAST = ["--spp", "2", "--resolution", "24x24", "-D", "mesh_segments=16", "-D", "max_depth=4"]

@@ -126,8 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     import mitsuba as mi
 
-    from ..imageio import write_exr, write_png
-    from ..scene_io import SceneError, check_output_folder, open_scene, root_message
+    from ..tools.images import write_exr, write_png
+    from ..tools.scenes import SceneError, check_output_folder, open_scene, root_message
 
     def fail(message: str) -> int:
         print(f"lathe-compare: error: {message}", file=sys.stderr)

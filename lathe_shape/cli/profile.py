@@ -38,8 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     import numpy as np
 
-    from .. import bspline as bs
-    from ..profile import make_profile, read_profile_csv
+    from ..profiles import bspline as bs
+    from ..profiles.polyline import make_profile, read_profile_csv
     from ..surfaces import make_bspline_profile
 
     def fail(message: str) -> int:
@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.input.lower().endswith((".json", ".toml")):
-            from ..arc_profile import load_profile_spec
+            from ..profiles.arcs import load_profile_spec
 
             points, sharp, labels = load_profile_spec(args.input)
         else:

@@ -40,8 +40,8 @@ def main(argv: list[str] | None = None) -> int:
     # Imported here so that --help works without touching the JIT backends.
     import mitsuba as mi
 
-    from ..imageio import write_exr, write_png
-    from ..scene_io import (
+    from ..tools.images import write_exr, write_png
+    from ..tools.scenes import (
         SceneError,
         check_output_folder,
         integrator_name,

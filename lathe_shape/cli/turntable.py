@@ -106,8 +106,8 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
 
-    from ..scene_io import SceneError, open_scene, root_message
-    from ..turntable import (
+    from ..tools.scenes import SceneError, open_scene, root_message
+    from ..tools.turntable import (
         JOB_KEYS,
         Frame,
         ProgressBar,

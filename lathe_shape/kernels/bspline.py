@@ -90,7 +90,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..bspline import power_coefficients
+from ..profiles.bspline import power_coefficients
 from .common import LEAF, LatheGeometry, LatheHit, threaded_bvh
 
 __all__ = [
@@ -214,7 +214,7 @@ def _bezier(p: np.ndarray) -> np.ndarray:
 
 def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
     """Pack validated per-segment control points (from
-    :func:`lathe_shape.bspline.bspline_segments`, oriented clockwise) into
+    :func:`lathe_shape.profiles.bspline.bspline_segments`, oriented clockwise) into
     opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
     threaded BVH and the bounding cylinder. Call once per shape."""
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)

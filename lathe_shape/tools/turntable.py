@@ -28,7 +28,7 @@ Example::
     import mitsuba as mi
     mi.set_variant("llvm_ad_rgb")
     import lathe_shape
-    from lathe_shape.turntable import Turntable, plan_frames, write_frame
+    from lathe_shape.tools.turntable import Turntable, plan_frames, write_frame
 
     scene = mi.load_file("scenes/wine_glass.xml", res=128)
     turntable = Turntable(scene, mode="rotate")
@@ -53,11 +53,11 @@ from typing import TYPE_CHECKING, TextIO
 import mitsuba as mi
 import numpy as np
 
-from .imageio import read_exr, write_exr, write_png
-from .scene_io import check_output_folder, integrator_name, scene_integrator
+from .images import read_exr, write_exr, write_png
+from .scenes import check_output_folder, integrator_name, scene_integrator
 
 if TYPE_CHECKING:
-    from .shape import LatheShape
+    from ..plugin.shape import LatheShape
 
 __all__ = [
     "JOB_KEYS",
@@ -290,7 +290,7 @@ def scene_lathes(scene: mi.Scene, path: str | os.PathLike | None = None) -> list
     file's elements by id; those without id take the places of the file's
     elements without id."""
     # Imported here: the plugin class needs a Mitsuba variant to be set.
-    from .shape import LatheShape
+    from ..plugin.shape import LatheShape
 
     lathes = [s for s in scene.shapes() if isinstance(s, LatheShape)]
     if path is None:

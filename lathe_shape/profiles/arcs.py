@@ -68,7 +68,7 @@ The spec (:func:`build_from_spec`, :func:`load_profile_spec`)::
     }
 
 The result is returned clockwise (the package's convention, method.md "The
-object") with the sharp flags, ready for :func:`lathe_shape.profile.make_profile`.
+object") with the sharp flags, ready for :func:`lathe_shape.profiles.polyline.make_profile`.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ from typing import Any
 
 import numpy as np
 
-from .profile import ProfileError
+from .polyline import ProfileError
 
 __all__ = [
     "ArcPiece",
@@ -521,9 +521,9 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     profile spec and build it.
 
     Returns ``(points, sharp, labels)`` like
-    :func:`lathe_shape.profile.read_profile_csv`; labels name the file and the
+    :func:`lathe_shape.profiles.polyline.read_profile_csv`; labels name the file and the
     point (``"glass.json, point 12"``). Raises
-    :class:`~lathe_shape.profile.ProfileError` with a message starting with
+    :class:`~lathe_shape.profiles.polyline.ProfileError` with a message starting with
     the file path and naming the bad key.
     """
     path = os.fspath(path)

@@ -25,7 +25,7 @@
        energy for dielectrics and removes the speckles of ``none``.
 
 Every ``lathe`` in the scene is intersected exactly by its kernel, merged with
-Mitsuba's hit on the rest of the scene (see :mod:`lathe_shape.scene_geometry`);
+Mitsuba's hit on the rest of the scene (see :mod:`lathe_shape.plugin.scene_geometry`);
 all other shapes, BSDFs and emitters are Mitsuba's own. The estimator follows
 Mitsuba's ``path``: emitter sampling and BSDF sampling combined with multiple
 importance sampling (power heuristic), Russian roulette after ``rr_depth``.

@@ -10,7 +10,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from .scene_io import load_string_in
+from .scenes import load_string_in
 
 __all__ = ["bench_arguments", "best_render_time", "load_with_profile", "points_text"]
 

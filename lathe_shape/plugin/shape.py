@@ -10,7 +10,7 @@
      - string
      - Profile CSV file (columns ``r,z[,sharp]``, ``#`` comments, optional
        header) or a ``.json``/``.toml`` arc profile spec (see
-       :mod:`lathe_shape.arc_profile`), resolved like Mitsuba's own file
+       :mod:`lathe_shape.profiles.arcs`), resolved like Mitsuba's own file
        names (relative to the scene file). Exactly one of ``filename`` and
        ``profile``.
    * - ``profile``
@@ -59,8 +59,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .profile import ProfileError, make_profile, parse_profile_string, read_profile_csv
-from .surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_bspline_profile
+from ..profiles.polyline import ProfileError, make_profile, parse_profile_string, read_profile_csv
+from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_bspline_profile
 from .variants import register_jit_plugin
 
 __all__ = ["LatheShape", "load_surface", "register"]
@@ -101,7 +101,7 @@ def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray
             raise ProfileError(f"{who}: parameter 'filename': profile file '{filename}' not found")
         if path.lower().endswith((".json", ".toml")):
             # A profile spec (arcs + wall thickness, paper section 2.3).
-            from .arc_profile import load_profile_spec
+            from ..profiles.arcs import load_profile_spec
 
             points, sharp, labels = load_profile_spec(path)
         else:
