@@ -15,8 +15,6 @@ B-spline, degree-6 roots, exact normals).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import mitsuba as mi
 import numpy as np
 
@@ -36,10 +34,11 @@ from .kernels.polyline import (
     polyline_geometry,
 )
 from .profiles import bspline as bs
-from .profiles.polyline import Profile
+from .profiles.bspline import BSplineProfile, make_bspline_profile
+from .profiles.polyline import Profile, ProfileError, make_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
-__all__ = ["PolylineSurface", "BSplineProfile", "BSplineSurface", "SURFACE_KINDS"]
+__all__ = ["PolylineSurface", "BSplineSurface", "SURFACE_KINDS", "make_surface"]
 
 
 class PolylineSurface:
@@ -80,37 +79,6 @@ class PolylineSurface:
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return polyline_geometry(self.data, p, seg, u, self.smooth)
-
-
-@dataclass(frozen=True)
-class BSplineProfile:
-    """A validated, clockwise uniform cubic B-spline profile."""
-
-    #: (m, 2) control points (clockwise; closed form without the repeat).
-    points: np.ndarray
-    #: (n_seg, 4, 2) control points of each curve segment.
-    segment_controls: np.ndarray
-    #: True for the closed periodic form, False for the open form.
-    closed_loop: bool
-    source: str
-
-    @property
-    def segment_count(self) -> int:
-        return len(self.segment_controls)
-
-    def bounds(self) -> tuple[float, float, float]:
-        """(r_max, z_min, z_max) of the control polygon (bounds the curve)."""
-        c = self.segment_controls.reshape(-1, 2)
-        return float(c[:, 0].max()), float(c[:, 1].min()), float(c[:, 1].max())
-
-
-def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
-    """Validate B-spline control points (see :mod:`lathe_shape.profiles.bspline`) and
-    orient them clockwise."""
-    points = bs.orient_clockwise(np.asarray(points, dtype=np.float64), source)
-    closed = bs.is_closed(points)
-    controls = bs.bspline_segments(points, source)
-    return BSplineProfile(points=points, segment_controls=controls, closed_loop=closed, source=source)
 
 
 class BSplineSurface:
@@ -176,5 +144,40 @@ class BSplineSurface:
         return bspline_geometry(self.data, p, seg, u)
 
 
-#: Profile kinds the ``kind`` parameter accepts.
-SURFACE_KINDS = ("polyline", "bspline")
+def _polyline_surface(points, sharp, labels, source, crease_angle, smooth):
+    profile = make_profile(points, sharp, labels, source=source, crease_angle=crease_angle)
+    return PolylineSurface(profile, smooth)
+
+
+def _bspline_surface(points, sharp, labels, source, crease_angle, smooth):
+    if np.any(sharp):
+        k = int(np.argmax(sharp))
+        raise ProfileError(
+            f"{labels[k]}: sharp flags are not supported for kind 'bspline' (the curve is smooth)"
+        )
+    return BSplineSurface(make_bspline_profile(points, source))
+
+
+#: The registry of profile kinds: the ``kind`` parameter's values and the
+#: factory that validates the points and builds the surface.
+SURFACE_KINDS = {"polyline": _polyline_surface, "bspline": _bspline_surface}
+
+
+def make_surface(
+    kind: str,
+    points: np.ndarray,
+    sharp: np.ndarray,
+    labels: list[str],
+    source: str,
+    crease_angle: float = 30.0,
+    smooth: bool = True,
+) -> PolylineSurface | BSplineSurface:
+    """Validate the points (once) as a profile of ``kind`` and build its
+    surface. ``labels[k]`` names point ``k`` and ``source`` the file or
+    parameter in error messages; ``crease_angle`` and ``smooth`` concern
+    polylines only (B-splines have exact normals)."""
+    if kind not in SURFACE_KINDS:
+        raise ProfileError(
+            f"{source}: unknown profile kind '{kind}' (expected one of: {', '.join(SURFACE_KINDS)})"
+        )
+    return SURFACE_KINDS[kind](points, sharp, labels, source, crease_angle, smooth)

@@ -122,9 +122,8 @@ def main() -> None:
     from bench_spline import SPLINE_GLASS
 
     from lathe_shape.kernels import polyline as P
-    from lathe_shape.profiles.bspline import to_polyline
+    from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
     from lathe_shape.profiles.polyline import make_profile
-    from lathe_shape.surfaces import make_bspline_profile
 
     K = load_kernel(args.module)
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")

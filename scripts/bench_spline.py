@@ -32,8 +32,7 @@ SPLINE_GLASS = np.array([
 
 def main() -> None:
     args = bench_arguments(__doc__.splitlines()[0])
-    from lathe_shape.profiles.bspline import to_polyline
-    from lathe_shape.surfaces import make_bspline_profile
+    from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
 
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")
     defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth),

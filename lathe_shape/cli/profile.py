@@ -39,8 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     import numpy as np
 
     from ..profiles import bspline as bs
+    from ..profiles.bspline import make_bspline_profile
     from ..profiles.polyline import make_profile, read_profile_csv
-    from ..surfaces import make_bspline_profile
 
     def fail(message: str) -> int:
         print(f"lathe-profile: error: {message}", file=sys.stderr)

@@ -59,8 +59,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..profiles.polyline import ProfileError, make_profile, parse_profile_string, read_profile_csv
-from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_bspline_profile
+from ..profiles.polyline import ProfileError, parse_profile_string, read_profile_csv
+from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .variants import register_jit_plugin
 
 __all__ = ["LatheShape", "load_surface", "register"]
@@ -130,15 +130,7 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
             f"(expected one of: {', '.join(SURFACE_KINDS)})"
         )
     points, sharp, labels, source = _read_points(props, who)
-    if kind == "polyline":
-        profile = make_profile(points, sharp, labels, source=source, crease_angle=crease)
-        return PolylineSurface(profile, smooth)
-    if sharp.any():
-        k = int(np.argmax(sharp))
-        raise ProfileError(
-            f"{labels[k]}: sharp flags are not supported for kind 'bspline' (the curve is smooth)"
-        )
-    return BSplineSurface(make_bspline_profile(points, source))
+    return make_surface(kind, points, sharp, labels, source, crease, smooth)
 
 
 class LatheShape(mi.Mesh):

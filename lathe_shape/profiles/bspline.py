@@ -29,11 +29,14 @@ clockwise in the (r right, z up) plane, interior on the right; use
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = [
     "BSplineError",
+    "BSplineProfile",
+    "make_bspline_profile",
     "bspline_segments",
     "is_closed",
     "power_coefficients",
@@ -320,6 +323,41 @@ def orient_clockwise(points: np.ndarray, source: str = "profile") -> np.ndarray:
     p = np.array(points, dtype=np.float64)
     seg = bspline_segments(p, source)
     return p if orientation_sign(seg) > 0 else p[::-1].copy()
+
+
+# ---------------------------------------------------------------------------
+# The validated profile
+# ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BSplineProfile:
+    """A validated, clockwise uniform cubic B-spline profile."""
+
+    #: (m, 2) control points (clockwise; closed form without the repeat).
+    points: np.ndarray
+    #: (n_seg, 4, 2) control points of each curve segment.
+    segment_controls: np.ndarray
+    #: True for the closed periodic form, False for the open form.
+    closed_loop: bool
+    source: str
+
+    @property
+    def segment_count(self) -> int:
+        return len(self.segment_controls)
+
+    def bounds(self) -> tuple[float, float, float]:
+        """(r_max, z_min, z_max) of the control polygon (bounds the curve)."""
+        c = self.segment_controls.reshape(-1, 2)
+        return float(c[:, 0].max()), float(c[:, 1].min()), float(c[:, 1].max())
+
+
+def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
+    """Validate B-spline control points (see the module docstring) and
+    orient them clockwise."""
+    points = orient_clockwise(np.asarray(points, dtype=np.float64), source)
+    closed = is_closed(points)
+    controls = bspline_segments(points, source)
+    return BSplineProfile(points=points, segment_controls=controls, closed_loop=closed, source=source)
 
 
 # ---------------------------------------------------------------------------
