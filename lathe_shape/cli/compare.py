@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-__all__ = ["main", "build_parser", "diverging_map", "difference_image", "compare_images"]
+__all__ = ["main", "build_parser", "diverging_map", "difference_image"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -85,23 +85,6 @@ def difference_image(exact: np.ndarray, mesh: np.ndarray, scale: float | None = 
     return np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8), scale
 
 
-def compare_images(exact: np.ndarray, mesh: np.ndarray) -> dict[str, float]:
-    """Error of ``mesh`` against ``exact``: relative mean absolute error and
-    RMSE (divided by the mean of ``exact``) and the largest absolute
-    difference."""
-    exact = np.asarray(exact, dtype=np.float64)
-    mesh = np.asarray(mesh, dtype=np.float64)
-    diff = mesh - exact
-    mean = float(exact.mean()) or 1.0
-    return {
-        "rel_mae": float(np.abs(diff).mean() / mean),
-        "rel_rmse": float(np.sqrt(np.square(diff).mean()) / mean),
-        "max_abs": float(np.abs(diff).max()),
-        "mean_exact": float(exact.mean()),
-        "bias": float((mesh.mean() - exact.mean()) / mean),
-    }
-
-
 def _scene_max_depth(scene) -> int | None:
     """max_depth of the scene's integrator, if it has one."""
     import mitsuba as mi
@@ -126,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     import mitsuba as mi
 
-    from ..tools.images import write_exr, write_png
+    from ..tools.images import image_errors, write_exr, write_png
     from ..tools.scenes import SceneError, check_output_folder, open_scene, root_message
 
     def fail(message: str) -> int:
@@ -182,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
 
     diff_png, scale = difference_image(images["exact"], images["mesh"])
     mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.path.join(out, "diff.png"))
-    err = compare_images(images["exact"], images["mesh"])
+    err = image_errors(images["mesh"], images["exact"])
     print(f"  mesh vs exact: relative mean abs error {err['rel_mae']:.4f}, relative RMSE "
           f"{err['rel_rmse']:.4f}, max abs difference {err['max_abs']:.4f}, bias {err['bias']:+.4f}")
     print(f"  diff.png: luminance mesh - exact, blue -{scale:.3g} .. white 0 .. red +{scale:.3g} "

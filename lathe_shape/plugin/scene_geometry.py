@@ -13,7 +13,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .shape import LatheShape
+from .shape import LatheShape, scene_lathes
 
 __all__ = ["ExactSceneGeometry"]
 
@@ -26,7 +26,7 @@ class ExactSceneGeometry:
         # this object (a cycle through C++ references would never be freed).
         self.fingerprint = self.scene_fingerprint(scene)
         shapes = scene.shapes()
-        self.lathes: list[LatheShape] = [s for s in shapes if isinstance(s, LatheShape)]
+        self.lathes: list[LatheShape] = scene_lathes(scene)
         others = [s for s in shapes if not isinstance(s, LatheShape)]
         if any(s.class_name() == "Instance" for s in others):
             self._refuse_instanced_lathes(scene)

@@ -63,7 +63,7 @@ from ..profiles.polyline import ProfileError, parse_profile_string, read_profile
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .variants import register_jit_plugin
 
-__all__ = ["LatheShape", "load_surface", "register"]
+__all__ = ["LatheShape", "load_surface", "register", "scene_lathes"]
 
 
 def _describe(props: mi.Properties) -> str:
@@ -288,6 +288,12 @@ def _check_transform(matrix: np.ndarray, who: str) -> None:
     linear = matrix[:3, :3]
     if abs(np.linalg.det(linear)) <= 1e-12 * max(1.0, float(np.abs(linear).max())) ** 3:
         raise ValueError(f"{who}: the transform is singular (a zero scale?)")
+
+
+def scene_lathes(scene: mi.Scene) -> list[LatheShape]:
+    """The lathes among ``scene.shapes()`` (in that order): the one way the
+    package finds them."""
+    return [shape for shape in scene.shapes() if isinstance(shape, LatheShape)]
 
 
 def register() -> None:

@@ -3,16 +3,15 @@ lathe profile is replaced inline."""
 
 from __future__ import annotations
 
-import re
 import time
 from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
 
-from .scenes import load_string_in
+from .scenes import load_string_in, replace_profile
 
-__all__ = ["bench_arguments", "best_render_time", "load_with_profile", "points_text"]
+__all__ = ["bench_arguments", "best_render_time", "load_with_profile"]
 
 
 def bench_arguments(description: str):
@@ -30,18 +29,12 @@ def bench_arguments(description: str):
     return args
 
 
-def points_text(points: np.ndarray) -> str:
-    """(n, 2) points -> the inline ``"r z, r z, ..."`` profile string."""
-    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in points)
-
-
 def load_with_profile(scene_file: str | Path, points: np.ndarray, kind: str = "polyline",
                       **defines: str) -> mi.Scene:
-    """Load a scene whose lathe's ``filename`` is replaced by the inline
-    profile ``points`` of the given ``kind``."""
+    """Load a scene whose lathe's profile is replaced by the inline profile
+    ``points`` of the given ``kind``."""
     scene_file = Path(scene_file)
-    shape = f'<string name="profile" value="{points_text(points)}"/><string name="kind" value="{kind}"/>'
-    text = re.sub(r'<string name="filename" value="[^"]*"/>', shape, scene_file.read_text())
+    text = replace_profile(scene_file.read_text(), points=points, kind=kind, source=str(scene_file))
     return load_string_in(scene_file.parent, text, **defines)
 
 

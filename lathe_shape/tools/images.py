@@ -1,4 +1,5 @@
-"""Image files: linear EXR through the OpenEXR package, sRGB PNG previews."""
+"""Image files (linear EXR through the OpenEXR package, sRGB PNG previews)
+and the one image-error metric every tool, script and test uses."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import os
 import numpy as np
 import OpenEXR
 
-__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8"]
+__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8", "image_errors", "relative_error"]
 
 
 def write_exr(
@@ -56,3 +57,37 @@ def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
     import mitsuba as mi
 
     mi.Bitmap(to_srgb8(rgb), pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))
+
+
+def image_errors(
+    image: np.ndarray, reference: np.ndarray, mask: np.ndarray | None = None
+) -> dict[str, float]:
+    """Error of ``image`` against ``reference`` (same shape), over the pixels
+    of ``mask`` (an (H, W) boolean array) when given.
+
+    ``rel_mae``: mean absolute difference / mean of the reference (the
+    project's "relative error"); ``rel_rmse``: RMS difference / mean of the
+    reference; ``bias``: (mean image - mean reference) / mean reference;
+    ``max_abs``: largest absolute difference; ``mean_reference``.
+    """
+    image = np.asarray(image, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    if image.shape != reference.shape:
+        raise ValueError(f"image_errors: shapes differ, {image.shape} vs {reference.shape}")
+    if mask is not None:
+        image, reference = image[mask], reference[mask]
+    diff = image - reference
+    mean = float(reference.mean()) or 1.0
+    return {
+        "rel_mae": float(np.abs(diff).mean() / mean),
+        "rel_rmse": float(np.sqrt(np.square(diff).mean()) / mean),
+        "bias": float(diff.mean() / mean),
+        "max_abs": float(np.abs(diff).max()),
+        "mean_reference": float(reference.mean()),
+    }
+
+
+def relative_error(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Mean absolute difference divided by the reference's mean (the
+    ``rel_mae`` of :func:`image_errors`)."""
+    return image_errors(image, reference, mask)["rel_mae"]

@@ -18,8 +18,11 @@ __all__ = [
     "open_scene",
     "parse_defines",
     "parse_resolution",
+    "points_text",
+    "replace_profile",
     "root_message",
     "scene_integrator",
+    "set_defaults",
 ]
 
 
@@ -53,10 +56,7 @@ def parse_resolution(text: str) -> tuple[int, int]:
 
 
 def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
-    try:
-        root = ET.fromstring(xml_text)
-    except ET.ParseError as e:
-        raise SceneError(f"{path}: not a valid XML file ({e})") from None
+    root = _parse_xml(xml_text, path)
     films = root.findall(".//sensor/film")
     if not films:
         raise SceneError(f"{path}: no <sensor> with a <film> to set the resolution on")
@@ -67,6 +67,62 @@ def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
                 node = ET.SubElement(film, "integer", {"name": name})
             node.tag = "integer"
             node.set("value", str(value))
+    return ET.tostring(root, encoding="unicode")
+
+
+def _parse_xml(xml_text: str, source: str) -> ET.Element:
+    try:
+        return ET.fromstring(xml_text)
+    except ET.ParseError as e:
+        raise SceneError(f"{source}: not a valid XML file ({e})") from None
+
+
+def set_defaults(xml_text: str, source: str = "scene", **values: object) -> str:
+    """The scene text with the value of each named ``<default>`` replaced
+    (e.g. ``set_defaults(text, spp=16, mesh_segments=64)``); a name the
+    scene does not declare is added as a new ``<default>``."""
+    root = _parse_xml(xml_text, source)
+    for name, value in values.items():
+        node = next((d for d in root.findall("default") if d.get("name") == name), None)
+        if node is None:
+            node = ET.Element("default", {"name": name})
+            root.insert(0, node)
+        node.set("value", str(value))
+    return ET.tostring(root, encoding="unicode")
+
+
+def points_text(points) -> str:
+    """(n, 2) points -> the inline ``"r z, r z, ..."`` profile string."""
+    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in points)
+
+
+def replace_profile(
+    xml_text: str,
+    points=None,
+    filename: str | None = None,
+    kind: str = "polyline",
+    lathe_id: str | None = None,
+    source: str = "scene",
+) -> str:
+    """The scene text with a lathe's profile replaced: by the inline
+    ``points`` ((n, 2) array) or by the profile file ``filename`` (exactly
+    one), of the given ``kind``. ``lathe_id`` picks the lathe (default: the
+    first ``<shape type="lathe">``)."""
+    if (points is None) == (filename is None):
+        raise ValueError("replace_profile: give exactly one of points and filename")
+    root = _parse_xml(xml_text, source)
+    lathes = [e for e in root.iter("shape") if e.get("type") == "lathe"]
+    if lathe_id is not None:
+        lathes = [e for e in lathes if e.get("id") == lathe_id]
+    if not lathes:
+        which = f" with id '{lathe_id}'" if lathe_id is not None else ""
+        raise SceneError(f"{source}: no <shape type=\"lathe\">{which}")
+    lathe = lathes[0]
+    for child in [c for c in lathe if c.get("name") in ("filename", "profile", "kind")]:
+        lathe.remove(child)
+    name, value = ("profile", points_text(points)) if filename is None else ("filename", filename)
+    lathe.insert(0, ET.Element("string", {"name": "kind", "value": kind}))
+    lathe.insert(0, ET.Element("string", {"name": name, "value": value}))
     return ET.tostring(root, encoding="unicode")
 
 
