@@ -6,28 +6,30 @@ import subprocess
 import sys
 
 import numpy as np
-from conftest import SCENES
+from conftest import SCENES, VARIANT
 
 from lathe_shape.tools.images import read_exr
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
+    """``lathe-render ARGS`` in the test suite's variant (an explicit
+    ``--variant`` later in ARGS wins)."""
     return subprocess.run(
-        [sys.executable, "-m", "lathe_shape.cli.render", *args],
+        [sys.executable, "-m", "lathe_shape.cli.render", "--variant", VARIANT, *args],
         capture_output=True, text=True, timeout=300,
     )
 
 
 def test_render_writes_exr_and_png(tmp_path):
-    out = tmp_path / "bottle.exr"
-    result = run_cli(str(SCENES / "brandy_bottle.xml"), "-o", str(out), "--spp", "2",
+    out = tmp_path / "brandy_bottle.exr"
+    result = run_cli(str(SCENES / "brandy_bottle.xml"), "-o", str(tmp_path), "--spp", "2",
                      "--resolution", "40x30", "-D", "mesh_segments=32", "--seed", "3")
     assert result.returncode == 0, result.stderr
     assert "40x30, 2 spp" in result.stdout and "rendered in" in result.stdout
     pixels, header = read_exr(out)
     assert pixels.shape == (30, 40, 3) and np.isfinite(pixels).all() and pixels.mean() > 0
     assert header["spp"] == 2 and header["seed"] == 3
-    assert (tmp_path / "bottle.png").stat().st_size > 0
+    assert (tmp_path / "brandy_bottle.png").stat().st_size > 0
 
 
 def test_errors(tmp_path):
@@ -36,7 +38,7 @@ def test_errors(tmp_path):
     assert f"scene file '{tmp_path / 'nope.xml'}' not found" in missing.stderr
     bad_xml = tmp_path / "bad.xml"
     bad_xml.write_text("<scene version='3.0.0'><shape type='lathe'/></scene>")
-    bad = run_cli(str(bad_xml), "-o", str(tmp_path / "x.exr"))
+    bad = run_cli(str(bad_xml), "-o", str(tmp_path))
     assert bad.returncode == 2 and "give exactly one of the parameters 'filename' and 'profile'" in bad.stderr
     assert "Traceback" not in bad.stderr
     define = run_cli(str(SCENES / "wine_glass.xml"), "-D", "spp")
@@ -60,10 +62,10 @@ NO_INTEGRATOR = """<scene version="3.0.0">
 def test_scene_without_integrator_uses_path(tmp_path):
     scene = tmp_path / "noint.xml"
     scene.write_text(NO_INTEGRATOR)
-    result = run_cli(str(scene), "-o", str(tmp_path / "n.exr"), "--spp", "1")
+    result = run_cli(str(scene), "-o", str(tmp_path), "--spp", "1")
     assert result.returncode == 0, result.stderr
     assert "integrator PathIntegrator" in result.stdout
-    pixels, _ = read_exr(tmp_path / "n.exr")
+    pixels, _ = read_exr(tmp_path / "noint.exr")
     assert pixels.shape == (12, 16, 3) and pixels.mean() > 0
 
 
@@ -72,9 +74,11 @@ def test_more_errors(tmp_path):
     assert folder.returncode == 2 and f"'{tmp_path}' is a folder, not a scene file" in folder.stderr
     scene = tmp_path / "noint.xml"
     scene.write_text(NO_INTEGRATOR)
-    png = run_cli(str(scene), "-o", str(tmp_path / "x.png"))
-    assert png.returncode == 2 and "the output must be an OpenEXR file ending in .exr" in png.stderr
+    (tmp_path / "taken").write_text("a file")
+    taken = run_cli(str(scene), "-o", str(tmp_path / "taken"))
+    assert taken.returncode == 2
+    assert f"output folder '{tmp_path / 'taken'}' exists and is not a folder" in taken.stderr
     bad = tmp_path / "bad.xml"
     bad.write_text(NO_INTEGRATOR.replace("0 0, 1 0, 1 2, 0 2", "0 0, 1 0, 1 2, 0.5 2"))
-    res = run_cli(str(bad), "--resolution", "8x8", "-o", str(tmp_path / "b.exr"))
+    res = run_cli(str(bad), "--resolution", "8x8", "-o", str(tmp_path))
     assert res.returncode == 2 and f"At {bad} (line" in res.stderr and "profile is not closed" in res.stderr

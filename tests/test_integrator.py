@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
+from lathe_shape.cli.common import root_message
 from lathe_shape.plugin.lathe_path import LathePathIntegrator
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
 from lathe_shape.plugin.shape import LatheShape
 from lathe_shape.tools.furnace import furnace_scene, glass_mask, run_furnace
-from lathe_shape.tools.scenes import root_message
 
 
 def camera_rays(scene: mi.Scene) -> tuple[mi.Ray3f, tuple[int, int]]:

@@ -110,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
     import mitsuba as mi
 
     from ..tools.images import image_errors, write_exr, write_png
-    from ..tools.scenes import SceneError, check_output_folder, open_scene, root_message
+    from ..tools.scenes import SceneError
+    from .common import CliError, open_scene, root_message
+    from .common import output_folder as check_output_folder
 
     def fail(message: str) -> int:
         print(f"lathe-compare: error: {message}", file=sys.stderr)
@@ -124,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
         out = check_output_folder(args.output)
-    except SceneError as e:
+    except (SceneError, CliError) as e:
         return fail(str(e))
     if not scene.sensors():
         return fail(f"{args.scene}: the scene has no sensor")

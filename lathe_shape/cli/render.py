@@ -3,7 +3,9 @@ sRGB PNG preview.
 
 Example::
 
-    lathe-render scenes/brandy_bottle.xml -o bottle.exr --spp 64 -D integrator=lathe_path
+    lathe-render scenes/brandy_bottle.xml -o out --spp 64 -D integrator=lathe_path
+
+writes ``out/brandy_bottle.exr`` and ``out/brandy_bottle.png``.
 """
 
 from __future__ import annotations
@@ -13,74 +15,49 @@ import os
 import sys
 import time
 
+from .common import add_output_option, add_render_options, run_command
+
 __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="lathe-render",
-        description="Render a Mitsuba 3 scene containing lathe shapes to EXR (+ PNG preview).",
+        description="Render a Mitsuba 3 scene containing lathe shapes to EXR (+ PNG preview), "
+                    "named after the scene file.",
     )
     parser.add_argument("scene", help="Mitsuba XML scene file")
-    parser.add_argument("-o", "--output", help="output EXR file (default: SCENE.exr next to the scene)")
-    parser.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
-    parser.add_argument("--resolution", metavar="WxH", help="override the film resolution, e.g. 640x480")
-    parser.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
-    parser.add_argument(
-        "-D", dest="defines", action="append", metavar="KEY=VALUE",
-        help="set an XML <default> parameter, e.g. -D integrator=lathe_path (repeatable)",
-    )
+    add_output_option(parser, default=".", what="SCENE.exr and SCENE.png")
+    add_render_options(parser)
     parser.add_argument("--no-png", action="store_true", help="do not write the PNG preview")
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def render(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
     import mitsuba as mi
 
     from ..tools.images import write_exr, write_png
-    from ..tools.scenes import (
-        SceneError,
-        check_output_folder,
-        integrator_name,
-        open_scene,
-        root_message,
-        scene_integrator,
-    )
+    from ..tools.scenes import integrator_name, scene_integrator
+    from .common import CliError, check_at_least, open_scene, output_folder
 
-    def fail(message: str) -> int:
-        print(f"lathe-render: error: {message}", file=sys.stderr)
-        return 2
-
-    if args.spp is not None and args.spp < 1:
-        return fail(f"--spp must be at least 1, got {args.spp}")
-    output = args.output or os.path.splitext(args.scene)[0] + ".exr"
-    if not output.lower().endswith(".exr"):
-        return fail(f"the output must be an OpenEXR file ending in .exr, got '{output}'")
-    try:
-        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
-        check_output_folder(os.path.dirname(os.path.abspath(output)))
-    except SceneError as e:
-        return fail(str(e))
+    check_at_least("--spp", args.spp, 1)
+    scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
+    stem = os.path.join(output_folder(args.output), os.path.splitext(os.path.basename(args.scene))[0])
     if not scene.sensors():
-        return fail(f"{args.scene}: the scene has no sensor")
+        raise CliError(f"{args.scene}: the scene has no sensor")
     sensor = scene.sensors()[0]
     width, height = sensor.film().size()
     spp = args.spp or sensor.sampler().sample_count()
     integrator = scene_integrator(scene)
     print(
-        f"lathe-render: {args.scene} -> {output}\n"
+        f"lathe-render: {args.scene} -> {stem}.exr\n"
         f"  {width}x{height}, {spp} spp, integrator {integrator_name(integrator)}, "
         f"variant {args.variant}, seed {args.seed}",
         flush=True,
     )
     start = time.perf_counter()
-    try:
-        rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
-    except RuntimeError as e:
-        return fail(root_message(e))
+    rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
     elapsed = time.perf_counter() - start
 
     metadata = {
@@ -91,14 +68,17 @@ def main(argv: list[str] | None = None) -> int:
         "scene": os.path.abspath(args.scene),
         "render_seconds": float(elapsed),
     }
-    write_exr(output, rgb, metadata)
-    written = [output]
+    written = [stem + ".exr"]
+    write_exr(written[0], rgb, metadata)
     if not args.no_png:
-        png = os.path.splitext(output)[0] + ".png"
-        write_png(png, rgb)
-        written.append(png)
+        written.append(stem + ".png")
+        write_png(written[1], rgb)
     print(f"  rendered in {elapsed:.2f} s; wrote {', '.join(written)}")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_command("lathe-render", build_parser(), render, argv)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,8 @@ import os
 import sys
 import time
 
+from .common import is_interrupt
+
 __all__ = ["main", "build_parser"]
 
 
@@ -80,24 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _is_interrupt(error: BaseException | None) -> bool:
-    """Ctrl-C, possibly wrapped: a KeyboardInterrupt raised inside
-    ``mi.render`` reaches us as the cause of Dr.Jit's RuntimeError."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, KeyboardInterrupt):
-            return True
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return False
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return _run(args)
     except (KeyboardInterrupt, RuntimeError) as e:
-        if not _is_interrupt(e):
+        if not is_interrupt(e):
             raise
         print("lathe-turntable: interrupted", file=sys.stderr)
         return 130
@@ -106,17 +96,14 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
 
-    from ..tools.scenes import SceneError, open_scene, root_message
+    from ..tools.scenes import SceneError
     from ..tools.turntable import (
         JOB_KEYS,
         Frame,
-        ProgressBar,
         Turntable,
         TurntableError,
         assemble_gif,
         assemble_mp4,
-        check_output_folder,
-        format_duration,
         frame_pngs,
         frame_state,
         integrator_name,
@@ -125,6 +112,8 @@ def _run(args: argparse.Namespace) -> int:
         require_video,
         write_frame,
     )
+    from .common import CliError, ProgressBar, format_duration, open_scene, root_message
+    from .common import output_folder as check_output_folder
 
     def fail(message: str) -> int:
         print(f"lathe-turntable: error: {message}", file=sys.stderr)
@@ -146,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
         scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
         turntable = Turntable(scene, mode, args.object, scene_path=args.scene)
         out_dir = check_output_folder(output)
-    except (SceneError, TurntableError, RuntimeError, ImportError) as e:
+    except (SceneError, CliError, TurntableError, RuntimeError, ImportError) as e:
         return fail(str(e))
 
     sensor = turntable.sensor
@@ -223,7 +212,7 @@ def _run(args: argparse.Namespace) -> int:
             progress.advance(seconds)
     except (KeyboardInterrupt, RuntimeError) as e:
         progress.close()
-        if not _is_interrupt(e):
+        if not is_interrupt(e):
             return fail(root_message(e))
         print(
             f"lathe-turntable: interrupted after {rendered} rendered frame(s); "

@@ -4,23 +4,17 @@ clear errors."""
 from __future__ import annotations
 
 import os
-import tempfile
 import xml.etree.ElementTree as ET
 
 import mitsuba as mi
 
 __all__ = [
     "SceneError",
-    "check_output_folder",
     "integrator_name",
     "load_scene",
     "load_string_in",
-    "open_scene",
-    "parse_defines",
-    "parse_resolution",
     "points_text",
     "replace_profile",
-    "root_message",
     "scene_integrator",
     "set_defaults",
 ]
@@ -30,29 +24,11 @@ class SceneError(RuntimeError):
     """A scene could not be loaded; the message names the file and the cause."""
 
 
-def parse_defines(items: list[str] | None) -> dict[str, str]:
-    """``["key=value", ...]`` (the ``-D`` options) -> dict."""
-    defines: dict[str, str] = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise SceneError(f"-D expects key=value, got {item!r}")
-        defines[key.strip()] = value
-    return defines
-
-
-def parse_resolution(text: str) -> tuple[int, int]:
-    """``"WxH"`` or ``"N"`` (square) -> (width, height)."""
-    parts = text.lower().split("x")
+def _parse_xml(xml_text: str, source: str) -> ET.Element:
     try:
-        values = [int(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) == 1:
-        values = values * 2
-    if len(values) != 2 or min(values) < 1:
-        raise SceneError(f"resolution must look like 640x480 or 512, got {text!r}")
-    return values[0], values[1]
+        return ET.fromstring(xml_text)
+    except ET.ParseError as e:
+        raise SceneError(f"{source}: not a valid XML file ({e})") from None
 
 
 def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
@@ -68,13 +44,6 @@ def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
             node.tag = "integer"
             node.set("value", str(value))
     return ET.tostring(root, encoding="unicode")
-
-
-def _parse_xml(xml_text: str, source: str) -> ET.Element:
-    try:
-        return ET.fromstring(xml_text)
-    except ET.ParseError as e:
-        raise SceneError(f"{source}: not a valid XML file ({e})") from None
 
 
 def set_defaults(xml_text: str, source: str = "scene", **values: object) -> str:
@@ -124,14 +93,6 @@ def replace_profile(
     lathe.insert(0, ET.Element("string", {"name": "kind", "value": kind}))
     lathe.insert(0, ET.Element("string", {"name": name, "value": value}))
     return ET.tostring(root, encoding="unicode")
-
-
-def root_message(error: BaseException) -> str:
-    """The innermost cause's message: ``mi.render`` wraps an integrator's
-    error in Dr.Jit's "error while performing a custom ... operation"."""
-    while error.__cause__ is not None:
-        error = error.__cause__
-    return str(error)
 
 
 def scene_integrator(scene: mi.Scene) -> mi.Integrator:
@@ -203,44 +164,3 @@ def load_scene(
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     return scene
-
-
-def open_scene(
-    path: str | os.PathLike,
-    variant: str,
-    defines: list[str] | None = None,
-    resolution: str | None = None,
-    extra_defines: dict[str, str] | None = None,
-) -> mi.Scene:
-    """What every command-line tool does first: select ``variant``, register
-    the plugins, parse ``-D key=value`` items and a ``WxH`` resolution, load
-    the scene. Raises :class:`SceneError` with a clear message."""
-    if variant not in mi.variants():
-        raise SceneError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
-    try:
-        mi.set_variant(variant)
-        import lathe_shape
-
-        lathe_shape.register()
-    except (RuntimeError, ImportError) as e:
-        raise SceneError(str(e)) from None
-    values = parse_defines(defines)
-    values.update(extra_defines or {})
-    size = parse_resolution(resolution) if resolution else None
-    return load_scene(path, values, size)
-
-
-def check_output_folder(path: str | os.PathLike) -> str:
-    """Create the folder ``path`` if missing and check that files can be
-    created in it (by creating one: ``os.access`` says yes to root even on a
-    read-only mount); returns its absolute path."""
-    path = os.path.abspath(os.fspath(path))
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise SceneError(f"output folder '{path}' exists and is not a folder")
-    try:
-        os.makedirs(path, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
-            pass
-    except OSError as e:
-        raise SceneError(f"cannot write to output folder '{path}' ({e.strerror or e})") from None
-    return path

@@ -43,18 +43,16 @@ from __future__ import annotations
 import math
 import os
 import re
-import sys
-import time
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
 import mitsuba as mi
 import numpy as np
 
 from .images import read_exr, write_exr, write_png
-from .scenes import check_output_folder, integrator_name, scene_integrator
+from .scenes import integrator_name, scene_integrator
 
 if TYPE_CHECKING:
     from ..plugin.shape import LatheShape
@@ -63,13 +61,10 @@ __all__ = [
     "JOB_KEYS",
     "MODES",
     "Frame",
-    "ProgressBar",
     "Turntable",
     "TurntableError",
     "assemble_gif",
     "assemble_mp4",
-    "check_output_folder",
-    "format_duration",
     "frame_angle",
     "frame_pngs",
     "frame_state",
@@ -536,68 +531,3 @@ def assemble_mp4(pngs: Sequence[str], path: str | os.PathLike, fps: float) -> No
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
-
-
-# -- progress -----------------------------------------------------------------
-
-
-def format_duration(seconds: float) -> str:
-    """``75.2`` -> ``"1:15"``; ``3725`` -> ``"1:02:05"``."""
-    seconds = int(round(max(seconds, 0.0)))
-    hours, rest = divmod(seconds, 3600)
-    minutes, secs = divmod(rest, 60)
-    return f"{hours}:{minutes:02d}:{secs:02d}" if hours else f"{minutes}:{secs:02d}"
-
-
-class ProgressBar:
-    """A one-line progress bar with ETA: frames done / total, elapsed time,
-    and the remaining time estimated from the frames rendered so far.
-
-    On a terminal the line is redrawn in place; otherwise (a log file, a CI
-    job) one line is written per update.
-    """
-
-    def __init__(self, total: int, done: int = 0, stream: TextIO | None = None, width: int = 24) -> None:
-        self.total, self.done, self.width = total, done, width
-        self.stream = stream if stream is not None else sys.stderr
-        self.rendered = 0
-        self.render_seconds = 0.0
-        self.start = time.perf_counter()
-        isatty = getattr(self.stream, "isatty", None)
-        self.interactive = bool(isatty and isatty())
-
-    def eta(self) -> float | None:
-        """Seconds left, from the mean time of the frames rendered so far."""
-        if self.rendered == 0:
-            return None
-        return (self.total - self.done) * self.render_seconds / self.rendered
-
-    def line(self) -> str:
-        filled = self.width * self.done // max(self.total, 1)
-        eta = self.eta()
-        return (
-            f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total} frames"
-            f"  elapsed {format_duration(time.perf_counter() - self.start)}"
-            f"  ETA {'--:--' if eta is None else format_duration(eta)}"
-        )
-
-    def show(self) -> None:
-        if self.interactive:
-            self.stream.write("\r" + self.line() + "\x1b[K")
-        else:
-            self.stream.write(self.line() + "\n")
-        self.stream.flush()
-
-    def advance(self, seconds: float | None = None) -> None:
-        """One more frame done: rendered in ``seconds``, or skipped (None)."""
-        self.done += 1
-        if seconds is not None:
-            self.rendered += 1
-            self.render_seconds += seconds
-        self.show()
-
-    def close(self) -> None:
-        """End the line (terminals only)."""
-        if self.interactive:
-            self.stream.write("\n")
-            self.stream.flush()
