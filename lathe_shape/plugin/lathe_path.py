@@ -31,17 +31,16 @@ Mitsuba's ``path``: emitter sampling and BSDF sampling combined with multiple
 importance sampling (power heuristic), Russian roulette after ``rr_depth``.
 Participating media are not handled.
 
-Why ``fallback`` is the default: in the white furnace (a glass under a
-uniform white sky, every pixel must be 1.0; ``scripts/furnace.py``, 128x128,
-256 spp) ``terminate`` averaged 0.934 (6.6 % energy lost along profile joints,
-12 % of pixels off by > 20 %), ``none`` 0.985 with 6.7 % speckled pixels --
-exactly what stock ``path`` gives on the smooth-shaded mesh (0.984) -- and
-``fallback`` 1.000 with 1.0 % such pixels and the lowest pixel deviation.
-With ``smooth`` false nothing can contradict and every policy gives 1.0.
-Under ``terminate`` and ``fallback`` emitter-sampled directions are checked
-too (rejected where they contradict the real surface). ``fallback`` is a
-heuristic: for non-delta BSDFs a redrawn direction enters MIS with its
-geometric-frame pdf, a small bias at the rare contradicting vertices.
+Why ``fallback`` is the default: in a white furnace (a glass under a uniform
+white sky, where every pixel must be 1; ``scripts/furnace.py``, figures in
+the README) ``terminate`` loses energy along the profile's joints, ``none``
+leaves speckles exactly as stock ``path`` does on the smooth-shaded mesh, and
+``fallback`` keeps the energy with the fewest speckles. With ``smooth`` false
+nothing can contradict and the policies agree. Under ``terminate`` and
+``fallback`` emitter-sampled directions are checked too (rejected where they
+contradict the real surface). ``fallback`` is a heuristic: for non-delta
+BSDFs a redrawn direction enters MIS with its geometric-frame pdf, a small
+bias at the rare contradicting vertices.
 """
 
 from __future__ import annotations
@@ -49,13 +48,13 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
-from .shape import typed_property
 from .variants import register_jit_plugin
 
 __all__ = ["LathePathIntegrator", "NORMAL_CHECKS", "register"]
 
-#: Policies of the ``normal_check`` parameter (method.md, eq. 11).
+#: Policies of the ``normal_check`` parameter (docs/method.md, eq. 11).
 NORMAL_CHECKS = ("none", "terminate", "fallback")
 
 

@@ -61,28 +61,10 @@ import numpy as np
 
 from ..profiles.polyline import ProfileError, parse_profile_string, read_profile_csv
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
+from .params import check_transform, describe_lathe, typed_property
 from .variants import register_jit_plugin
 
 __all__ = ["LatheShape", "load_surface", "register", "scene_lathes"]
-
-
-def _describe(props: mi.Properties) -> str:
-    name = props.id()
-    return f"lathe '{name}'" if name else "lathe"
-
-
-def typed_property(props: mi.Properties, name: str, kind: type, default, who: str):
-    """``props[name]`` checked to be a ``kind`` (bool, int, float or str):
-    the XML tag must match, e.g. ``<boolean name="smooth" value="false"/>``
-    (a ``<string>`` "false" would otherwise read as true)."""
-    value = props.get(name, default)
-    ok = isinstance(value, kind) and not (kind is int and isinstance(value, bool))
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value, ok = float(value), True
-    if not ok:
-        tag = {bool: "boolean", int: "integer", float: "float", str: "string"}[kind]
-        raise ValueError(f"{who}: parameter '{name}' must be given as <{tag}>, got {value!r}")
-    return value
 
 
 def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray, list[str], str]:
@@ -118,7 +100,7 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
 
     Raises :class:`ValueError` naming the file or parameter on bad input.
     """
-    who = _describe(props)
+    who = describe_lathe(props)
     kind = typed_property(props, "kind", str, "polyline", who)
     crease = typed_property(props, "crease_angle", float, 30.0, who)
     smooth = typed_property(props, "smooth", bool, True, who)
@@ -138,7 +120,7 @@ class LatheShape(mi.Mesh):
     intersection through :meth:`ray_intersect_exact` (see module docstring)."""
 
     def __init__(self, props: mi.Properties) -> None:
-        who = _describe(props)
+        who = describe_lathe(props)
         steps = typed_property(props, "mesh_segments", int, 256, who)
         if steps < 3:
             raise ValueError(f"{who}: parameter 'mesh_segments' must be at least 3, got {steps}")
@@ -150,7 +132,7 @@ class LatheShape(mi.Mesh):
         to_world = props.get("to_world", mi.ScalarTransform4f())
         #: (4, 4) float64 local-to-world matrix.
         self.to_world_matrix = np.array(to_world.matrix, dtype=np.float64)
-        _check_transform(self.to_world_matrix, f"{who}: parameter 'to_world'")
+        check_transform(self.to_world_matrix, f"{who}: parameter 'to_world'")
         #: The reference tessellation in the local frame.
         self.local_mesh = self.surface.tessellate(steps)
 
@@ -203,7 +185,7 @@ class LatheShape(mi.Mesh):
         who = (f"lathe '{self.id()}'" if self.id() else "lathe") + ": set_to_world"
         if matrix.shape != (4, 4):
             raise ValueError(f"{who} needs a 4x4 matrix, got shape {matrix.shape}")
-        _check_transform(matrix, who)
+        check_transform(matrix, who)
         if np.linalg.det(matrix[:3, :3]) * np.linalg.det(self.to_world_matrix[:3, :3]) < 0.0:
             # The mesh's face winding was fixed for the original handedness.
             raise ValueError(f"{who}: the new transform mirrors the shape relative to the old one")
@@ -279,17 +261,6 @@ class LatheShape(mi.Mesh):
         )
 
 
-def _check_transform(matrix: np.ndarray, who: str) -> None:
-    """A usable local-to-world transform: finite, affine, invertible."""
-    if not np.isfinite(matrix).all():
-        raise ValueError(f"{who}: the transform has non-finite entries")
-    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(f"{who}: the transform must be affine (no projection)")
-    linear = matrix[:3, :3]
-    if abs(np.linalg.det(linear)) <= 1e-12 * max(1.0, float(np.abs(linear).max())) ** 3:
-        raise ValueError(f"{who}: the transform is singular (a zero scale?)")
-
-
 def scene_lathes(scene: mi.Scene) -> list[LatheShape]:
     """The lathes among ``scene.shapes()`` (in that order): the one way the
     package finds them."""
@@ -298,4 +269,4 @@ def scene_lathes(scene: mi.Scene) -> list[LatheShape]:
 
 def register() -> None:
     """Register ``<shape type="lathe">`` for the active variant."""
-    register_jit_plugin(mi.register_shape, "lathe", LatheShape, _describe)
+    register_jit_plugin(mi.register_shape, "lathe", LatheShape, describe_lathe)

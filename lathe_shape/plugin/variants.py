@@ -1,13 +1,15 @@
-"""Registering plugins only where they can run (JIT variants)."""
+"""Registering the plugins for the active Mitsuba variant: only JIT variants
+run them, and LLVM variants need a libLLVM that Dr.Jit can use."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["register_jit_plugin"]
+__all__ = ["MIN_LLVM_VERSION", "check_llvm", "on_variant_change", "register", "register_jit_plugin"]
 
 
 def register_jit_plugin(
@@ -30,3 +32,48 @@ def register_jit_plugin(
         )
 
     register(name, unsupported)
+
+
+#: Lowest LLVM measured to work with Dr.Jit 1.5 here: libLLVM 14 is refused by
+#: Dr.Jit, 15 and 16 abort at the first ``dr.minimum``/``dr.maximum``
+#: ("Cannot select: fminimum/fmaximum"), 19 works; 17 and 18 are not packaged
+#: for Debian 12 and were not measured (set LATHE_SHAPE_SKIP_LLVM_CHECK=1 to
+#: try them).
+MIN_LLVM_VERSION = (19, 0, 0)
+
+
+def check_llvm(variant: str | None = None) -> None:
+    """Raise a clear error if an LLVM variant would run on a broken libLLVM."""
+    variant = variant or mi.variant()
+    if not variant or not variant.startswith("llvm") or os.environ.get("LATHE_SHAPE_SKIP_LLVM_CHECK"):
+        return
+    version = tuple(dr.detail.llvm_version())
+    if version == (0, 0, 0) or version < MIN_LLVM_VERSION:
+        found = "no libLLVM" if version == (0, 0, 0) else "libLLVM " + ".".join(map(str, version))
+        raise RuntimeError(
+            f"lathe_shape: Mitsuba variant '{variant}' needs libLLVM >= "
+            f"{MIN_LLVM_VERSION[0]}, but Dr.Jit found {found} (versions 15 and 16 crash "
+            "with 'Cannot select fminimum'). Fix: 'apt-get install -y libllvm19' "
+            "(Dr.Jit finds it by itself), or point DRJIT_LIBLLVM_PATH at libLLVM.so.19.1."
+        )
+
+
+def register(variant: str | None = None) -> None:
+    """Register the ``lathe`` shape and ``lathe_path`` integrator for the
+    active Mitsuba variant."""
+    if variant is None:
+        variant = mi.variant()
+    if variant is None:
+        return
+    check_llvm(variant)
+    from .lathe_path import register as register_integrator
+    from .shape import register as register_shape
+
+    register_shape()
+    register_integrator()
+
+
+def on_variant_change(old: str | None, new: str | None) -> None:
+    """Mitsuba variant callback: register the plugins for the new variant."""
+    if new is not None:
+        register(new)

@@ -1,0 +1,40 @@
+"""Reading plugin parameters: typed values and transforms, checked, with
+errors that name the plugin and the parameter."""
+
+from __future__ import annotations
+
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["check_transform", "describe_lathe", "typed_property"]
+
+
+def describe_lathe(props: mi.Properties) -> str:
+    """``lathe 'ID'`` (or ``lathe``) for error messages."""
+    name = props.id()
+    return f"lathe '{name}'" if name else "lathe"
+
+
+def typed_property(props: mi.Properties, name: str, kind: type, default, who: str):
+    """``props[name]`` checked to be a ``kind`` (bool, int, float or str):
+    the XML tag must match, e.g. ``<boolean name="smooth" value="false"/>``
+    (a ``<string>`` "false" would otherwise read as true)."""
+    value = props.get(name, default)
+    ok = isinstance(value, kind) and not (kind is int and isinstance(value, bool))
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value, ok = float(value), True
+    if not ok:
+        tag = {bool: "boolean", int: "integer", float: "float", str: "string"}[kind]
+        raise ValueError(f"{who}: parameter '{name}' must be given as <{tag}>, got {value!r}")
+    return value
+
+
+def check_transform(matrix: np.ndarray, who: str) -> None:
+    """A usable local-to-world transform: finite, affine, invertible."""
+    if not np.isfinite(matrix).all():
+        raise ValueError(f"{who}: the transform has non-finite entries")
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{who}: the transform must be affine (no projection)")
+    linear = matrix[:3, :3]
+    if abs(np.linalg.det(linear)) <= 1e-12 * max(1.0, float(np.abs(linear).max())) ** 3:
+        raise ValueError(f"{who}: the transform is singular (a zero scale?)")
