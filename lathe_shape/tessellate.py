@@ -42,6 +42,9 @@ class TriangleMesh:
     texcoords: np.ndarray
     #: (F, 3) uint32 vertex indices, counter-clockwise seen from outside.
     faces: np.ndarray
+    #: (F,) index of the band (pair of rings, see :func:`revolve`) that each
+    #: face belongs to: the profile segment for polylines.
+    face_band: np.ndarray
 
 
 def revolve(
@@ -96,19 +99,23 @@ def revolve(
 
     j = np.arange(steps)
     faces = []
-    for a, b in bands:
+    face_band = []
+    for band, (a, b) in enumerate(bands):
         if not pole[a]:
             # (A_j, B_j, A_j+1): normal T_profile x T_azimuth = outward.
             faces.append(np.stack([vid(a, j), vid(b, j), vid(a, j + 1)], axis=1))
+            face_band.append(np.full(steps, band))
         if not pole[b]:
             # (A_j+1, B_j, B_j+1); with A a pole, A_j stands for A_j+1.
             a_next = vid(a, j) if pole[a] else vid(a, j + 1)
             faces.append(np.stack([a_next, vid(b, j), vid(b, j + 1)], axis=1))
+            face_band.append(np.full(steps, band))
     return TriangleMesh(
         positions=positions.reshape(-1, 3),
         normals=normals.reshape(-1, 3),
         texcoords=texcoords.reshape(-1, 2),
         faces=np.concatenate(faces).astype(np.uint32),
+        face_band=np.concatenate(face_band).astype(np.uint32),
     )
 
 

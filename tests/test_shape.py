@@ -118,3 +118,56 @@ def test_set_to_world_moves_mesh_and_exact_surface():
         shape.set_to_world(np.diag([-1.0, 1.0, 1.0, 1.0]), scene)
     with pytest.raises(ValueError, match="the transform is singular"):
         shape.set_to_world(np.diag([0.0, 1.0, 1.0, 1.0]), scene)
+
+
+SHARED_BSDF_XML = """<scene version="3.0.0">
+    <bsdf type="diffuse" id="glass_material"/>
+    <shape type="lathe" id="left">
+        <string name="profile" value="0 0, 1 0, 1 2, 0 2"/><integer name="mesh_segments" value="8"/>
+        <ref id="glass_material"/>
+    </shape>
+    <shape type="lathe" id="right">
+        <string name="profile" value="0 0, 1 0, 1 2, 0 2"/><integer name="mesh_segments" value="8"/>
+        <transform name="to_world"><translate x="3"/></transform>
+        <ref id="glass_material"/>
+    </shape>
+    <shape type="lathe" id="third">
+        <string name="profile" value="0 0, 1 0, 1 2, 0 2"/><integer name="mesh_segments" value="8"/>
+        <transform name="to_world"><translate x="-3"/></transform>
+        <bsdf type="diffuse"/>
+    </shape>
+</scene>"""
+
+
+def _lathe_ids(scene: mi.Scene) -> list[str]:
+    return sorted(s.id() for s in scene.shapes() if isinstance(s, LatheShape))
+
+
+def test_lathes_sharing_a_bsdf_are_not_merged():
+    """Mitsuba's default scene optimisation merges meshes with equivalent
+    BSDFs into one plain mesh; lathes must survive it (XML with a shared
+    reference or equal nested BSDFs, and dicts sharing one BSDF object)."""
+    assert _lathe_ids(mi.load_string(SHARED_BSDF_XML)) == ["left", "right", "third"]
+    bsdf = mi.load_dict({"type": "diffuse"})
+
+    def lathe(x: float) -> dict:
+        return {"type": "lathe", "profile": "0 0, 1 0, 1 2, 0 2", "mesh_segments": 8,
+                "to_world": mi.ScalarTransform4f().translate([x, 0, 0]), "material": bsdf}
+
+    shared = mi.load_dict({"type": "scene", "a": lathe(0), "b": lathe(3), "c": lathe(-3)})
+    assert _lathe_ids(shared) == ["a", "b", "c"]
+    by_ref = mi.load_dict({"type": "scene", "m": {"type": "diffuse"},
+                           "a": {**lathe(0), "material": {"type": "ref", "id": "m"}},
+                           "b": {**lathe(3), "material": {"type": "ref", "id": "m"}}})
+    assert _lathe_ids(by_ref) == ["a", "b"]
+
+
+def test_face_band_attribute_names_the_profile_segment():
+    scene = mi.load_string(SHARED_BSDF_XML)
+    lathe = next(s for s in scene.shapes() if s.id() == "left")
+    bands = lathe.attribute_buffer("face_lathe_band").numpy()
+    assert len(bands) == lathe.face_count()
+    # The profile "0 0, 1 0, 1 2, 0 2" has 3 surface segments, 8 steps each;
+    # the disc segments touch a pole and have one triangle per step, the
+    # cylinder two.
+    assert np.array_equal(np.bincount(bands.astype(int)), [8, 16, 8])

@@ -49,6 +49,9 @@ does not handle participating media).
 The plugin is a :class:`mitsuba.Mesh` holding the reference tessellation, so
 stock integrators (``path``, ``volpath``, ...) render it as a smooth-shaded
 mesh; ``lathe_path`` calls :meth:`LatheShape.ray_intersect_exact` instead.
+The mesh carries a face attribute ``face_lathe_band`` (the profile segment
+of each triangle for polylines); Mitsuba's scene optimizer never merges a
+mesh with attributes, so lathes that share a BSDF stay lathes.
 """
 
 from __future__ import annotations
@@ -64,7 +67,11 @@ from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surf
 from .params import check_transform, describe_lathe, typed_property
 from .variants import register_jit_plugin
 
-__all__ = ["LatheShape", "load_surface", "register", "scene_lathes"]
+__all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
+
+#: Face attribute of the reference mesh: the profile band (the profile
+#: segment for polylines) that each triangle sweeps.
+FACE_BAND_ATTRIBUTE = "face_lathe_band"
 
 
 def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray, list[str], str]:
@@ -144,6 +151,11 @@ class LatheShape(mi.Mesh):
             # The buffer types differ between JIT and scalar variants.
             params[key] = type(params[key])(value.ravel())
         params.update()
+        # A mesh attribute makes Mitsuba's scene optimizer (the default
+        # optimize=True of mi.load_file, and mi.load_dict with a shared BSDF)
+        # leave this mesh alone: it merges only meshes without attributes, and
+        # a merged lathe would lose its exact surface without a word.
+        self.add_attribute(FACE_BAND_ATTRIBUTE, 1, mi.Float(self.local_mesh.face_band.astype(np.float32)))
         self._set_transform(self.to_world_matrix)
 
     def _set_transform(self, matrix: np.ndarray) -> None:
