@@ -171,3 +171,36 @@ def test_face_band_attribute_names_the_profile_segment():
     # the disc segments touch a pole and have one triangle per step, the
     # cylinder two.
     assert np.array_equal(np.bincount(bands.astype(int)), [8, 16, 8])
+
+
+def test_typed_profile_and_transform_parameters():
+    """A mistyped ``profile``, ``filename`` or ``to_world`` gets the
+    typed-parameter error, and a tiny uniform scale is not singular."""
+    base = ('<scene version="3.0.0"><shape type="lathe" id="g">{}'
+            '</shape></scene>')
+    cases = [
+        ('<integer name="profile" value="3"/>', "parameter 'profile' must be given as <string>"),
+        ('<integer name="filename" value="3"/>', "parameter 'filename' must be given as <string>"),
+        ('<string name="profile" value="0 0, 1 0, 1 1, 0 1"/><string name="to_world" value="1"/>',
+         "parameter 'to_world' must be given as <transform>"),
+    ]
+    for body, message in cases:
+        with pytest.raises(RuntimeError, match=re.escape(message)):
+            mi.load_string(base.format(body))
+    small = mi.load_string(base.format(
+        '<string name="profile" value="0 0, 1 0, 1 1, 0 1"/>'
+        '<transform name="to_world"><scale value="1e-4"/></transform>'))
+    lathe = small.shapes()[0]
+    assert np.allclose(lathe.to_world_matrix[:3, :3], 1e-4 * np.eye(3))
+
+
+def test_misses_carry_finite_fields():
+    scene = mi.load_string('<scene version="3.0.0"><shape type="lathe">'
+                           '<string name="profile" value="0 0, 1 0, 1 1, 0 1"/></shape></scene>')
+    lathe = scene.shapes()[0]
+    o = mi.Point3f([np.nan, np.inf, 5.0], [0.0, 0.0, 5.0], [0.5, 0.5, 0.5])
+    d = mi.Vector3f([1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    si = lathe.ray_intersect_exact(mi.Ray3f(o, d))
+    assert not si.is_valid().numpy().any()
+    for field in (si.p, si.n, si.sh_frame.n, si.sh_frame.s, si.wi, si.uv, si.dp_du):
+        assert np.isfinite(np.asarray(field.numpy())).all()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["check_transform", "describe_lathe", "typed_property"]
+__all__ = ["check_transform", "describe_lathe", "transform_property", "typed_property"]
 
 
 def describe_lathe(props: mi.Properties) -> str:
@@ -29,6 +29,17 @@ def typed_property(props: mi.Properties, name: str, kind: type, default, who: st
     return value
 
 
+def transform_property(props: mi.Properties, name: str, who: str) -> np.ndarray:
+    """``props[name]`` as a (4, 4) float64 matrix (identity when absent);
+    it must be given as ``<transform>``."""
+    value = props.get(name, mi.ScalarTransform4f())
+    if not isinstance(value, (mi.ScalarTransform4f, mi.ScalarTransform4d)):
+        raise ValueError(f"{who}: parameter '{name}' must be given as <transform>, got {value!r}")
+    matrix = np.array(value.matrix, dtype=np.float64)
+    check_transform(matrix, f"{who}: parameter '{name}'")
+    return matrix
+
+
 def check_transform(matrix: np.ndarray, who: str) -> None:
     """A usable local-to-world transform: finite, affine, invertible."""
     if not np.isfinite(matrix).all():
@@ -36,5 +47,7 @@ def check_transform(matrix: np.ndarray, who: str) -> None:
     if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
         raise ValueError(f"{who}: the transform must be affine (no projection)")
     linear = matrix[:3, :3]
-    if abs(np.linalg.det(linear)) <= 1e-12 * max(1.0, float(np.abs(linear).max())) ** 3:
+    # Relative to the product of the column lengths (Hadamard's bound on the
+    # determinant), so that a uniform scale of any size is accepted.
+    if abs(np.linalg.det(linear)) <= 1e-9 * float(np.prod(np.linalg.norm(linear, axis=0))):
         raise ValueError(f"{who}: the transform is singular (a zero scale?)")

@@ -64,7 +64,7 @@ import numpy as np
 
 from ..profiles.polyline import ProfileError, parse_profile_string, read_profile_csv
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
-from .params import check_transform, describe_lathe, typed_property
+from .params import check_transform, describe_lathe, transform_property, typed_property
 from .variants import register_jit_plugin
 
 __all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
@@ -84,7 +84,7 @@ def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray
             + (" (both were given)" if has_file else "")
         )
     if has_file:
-        filename = props.get("filename")
+        filename = typed_property(props, "filename", str, "", who)
         path = str(mi.file_resolver().resolve(filename))
         if not os.path.exists(path):
             raise ProfileError(f"{who}: parameter 'filename': profile file '{filename}' not found")
@@ -97,7 +97,7 @@ def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray
             points, sharp, labels = read_profile_csv(path)
         return points, sharp, labels, path
     source = f"{who}: parameter 'profile'"
-    points, sharp, labels = parse_profile_string(props.get("profile"), source)
+    points, sharp, labels = parse_profile_string(typed_property(props, "profile", str, "", who), source)
     return points, sharp, labels, source
 
 
@@ -136,10 +136,8 @@ class LatheShape(mi.Mesh):
         self.profile = self.surface.profile
         self.smooth = self.surface.smooth
         self.flip = typed_property(props, "flip_normals", bool, False, who)
-        to_world = props.get("to_world", mi.ScalarTransform4f())
         #: (4, 4) float64 local-to-world matrix.
-        self.to_world_matrix = np.array(to_world.matrix, dtype=np.float64)
-        check_transform(self.to_world_matrix, f"{who}: parameter 'to_world'")
+        self.to_world_matrix = transform_property(props, "to_world", who)
         #: The reference tessellation in the local frame.
         self.local_mesh = self.surface.tessellate(steps)
 
@@ -243,7 +241,9 @@ class LatheShape(mi.Mesh):
     def _interaction(self, ray: mi.Ray3f, o: mi.Point3f, d: mi.Vector3f, hit) -> mi.SurfaceInteraction3f:
         valid = hit.valid
         t = dr.select(valid, hit.t, 0.0)
-        geo = self.surface.geometry(o + t * d, hit.seg, hit.u)
+        # Misses are evaluated at the local origin, so that their fields stay
+        # finite even for rays with non-finite origins.
+        geo = self.surface.geometry(dr.select(valid, o + t * d, 0.0), hit.seg, hit.u)
         n = dr.normalize(self._to_world @ mi.Normal3f(geo.n))
         sh_n = dr.normalize(self._to_world @ mi.Normal3f(geo.sh_n))
         if self.flip:
@@ -253,7 +253,7 @@ class LatheShape(mi.Mesh):
         si.t = dr.select(valid, hit.t, dr.inf)
         si.time = ray.time
         si.wavelengths = ray.wavelengths
-        si.p = ray(t)
+        si.p = dr.select(valid, ray(t), 0.0)
         si.n = n
         si.sh_frame = mi.Frame3f(sh_n)
         si.uv = geo.uv
@@ -261,7 +261,7 @@ class LatheShape(mi.Mesh):
         si.dp_dv = self._to_world @ geo.dp_dv
         si.prim_index = hit.seg
         si.shape = dr.select(valid, mi.ShapePtr(self), dr.zeros(mi.ShapePtr))
-        si.wi = dr.select(valid, si.to_local(-ray.d), -ray.d)
+        si.wi = dr.select(valid, si.to_local(-ray.d), 0.0)
         return si
 
     def to_string(self) -> str:
