@@ -77,7 +77,7 @@ def add_output_option(parser: argparse.ArgumentParser, default: str | None = "ou
 
 def add_render_options(parser: argparse.ArgumentParser, seed_help: str = "sampler seed (default: 0)",
                        spp_default: int | None = None, resolution_default: str | None = None,
-                       defines: bool = True) -> None:
+                       defines: bool = True, seed_default: int = 0) -> None:
     """``--spp``, ``--resolution``, ``--seed``, ``--variant`` and (unless
     ``defines`` is False, for scenes built in Python) ``-D``."""
     spp_help = spp_default or "the scene's sampler"
@@ -86,7 +86,7 @@ def add_render_options(parser: argparse.ArgumentParser, seed_help: str = "sample
                         help=f"samples per pixel (default: {spp_help})")
     parser.add_argument("--resolution", metavar="WxH", default=resolution_default,
                         help=f"film resolution, e.g. 640x480, or 512 for a square (default: {size_help})")
-    parser.add_argument("--seed", type=int, default=0, help=seed_help)
+    parser.add_argument("--seed", type=int, default=seed_default, help=seed_help)
     parser.add_argument("--variant", default=DEFAULT_VARIANT,
                         help=f"Mitsuba variant (default: {DEFAULT_VARIANT})")
     if defines:
