@@ -20,10 +20,11 @@ import os
 import sys
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from .common import (
     CliError,
+    ProgressBar,
     add_output_option,
     add_render_options,
     check_at_least,
@@ -31,6 +32,10 @@ from .common import (
     is_interrupt,
     run_command,
 )
+
+if TYPE_CHECKING:  # imported where needed: --help needs no Mitsuba variant
+    from ..tools.frames import Frame
+    from ..tools.turntable import Turntable
 
 __all__ = ["main", "build_parser", "parse_frames"]
 
@@ -120,14 +125,14 @@ class Job:
     metadata records."""
 
     args: argparse.Namespace
-    turntable: Any  # tools.turntable.Turntable (imported lazily)
+    turntable: Turntable
     indices: range
     out_dir: str
     spp: int
     size: tuple[int, int]
     integrator: str
 
-    def metadata(self, frame) -> dict[str, object]:
+    def metadata(self, frame: Frame) -> dict[str, object]:
         """The EXR header of ``frame`` (without its render time)."""
         return {
             "frame": frame.index,
@@ -191,14 +196,14 @@ def describe(job: Job) -> None:
     )
 
 
-def _expected(job: Job, frame) -> dict[str, object]:
+def _expected(job: Job, frame: Frame) -> dict[str, object]:
     """The header values a finished frame of this job must carry."""
     from ..tools.frames import JOB_KEYS
 
     return {k: v for k, v in job.metadata(frame).items() if k in JOB_KEYS}
 
 
-def pending_frames(job: Job, frames: list) -> list:
+def pending_frames(job: Job, frames: list[Frame]) -> list[Frame]:
     """The frames still to render (all with ``--force``); says how many were
     skipped as finished or are rendered again as another job's."""
     from ..tools.frames import frame_state
@@ -218,7 +223,7 @@ def pending_frames(job: Job, frames: list) -> list:
     return todo
 
 
-def render_frames(job: Job, todo: list, progress) -> None:
+def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
     """Render and write the frames of ``todo``, advancing ``progress``
     (skipping those another process on the same folder finished meanwhile)."""
     from ..tools.frames import frame_state, write_frame
@@ -245,7 +250,7 @@ def render_job(job: Job) -> int:
     import drjit as dr
 
     from ..tools.frames import plan_frames
-    from .common import ProgressBar, format_duration
+    from .common import format_duration
 
     frames = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed)
     todo = pending_frames(job, frames)
