@@ -376,3 +376,32 @@ def test_help(capsys):
     text = capsys.readouterr().out
     for option in ("--count", "--frames", "--object", "--orbit", "--gif", "--mp4", "--fps", "-D"):
         assert option in text
+
+
+def test_mp4_writer_pads_and_renames(tmp_path, capsys, monkeypatch):
+    """The MP4 path without ffmpeg: a stand-in imageio_ffmpeg records the
+    frames; odd sizes are padded to even ones and the file appears only
+    when complete."""
+    out = tmp_path / "turn"
+    odd = [*FAST[:2], "--resolution", "25x15", *FAST[4:]]
+    assert run(capsys, WINE, "-o", str(out), "--count", "2", *odd)[0] == 0
+    sent = []
+
+    def write_frames(path, size, **options):  # imageio_ffmpeg's generator protocol
+        assert os.path.basename(path).startswith(".") and not (out / "turntable.mp4").exists()
+        sent.append(size)
+        with open(path, "wb") as f:
+            while True:
+                image = yield  # the first send(None) only starts the generator
+                sent.append(image.shape)
+                f.write(b"frame")
+
+    fake = type(sys)("imageio_ffmpeg")
+    fake.write_frames = write_frames
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", fake)
+    code, stdout, stderr = run(capsys, WINE, "-o", str(out), "--count", "2", "--mp4", *odd)
+    assert code == 0, stderr
+    assert "rendered 0 frame(s), skipped 2" in stdout and "turntable.mp4 (2 frames, 12 fps)" in stdout
+    assert sent == [(26, 16), (16, 26, 3), (16, 26, 3)]
+    assert (out / "turntable.mp4").read_bytes() == b"frame" * 2
+    assert not [p for p in os.listdir(out) if p.startswith(".")]

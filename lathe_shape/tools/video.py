@@ -51,7 +51,7 @@ def _read_pngs(pngs: Sequence[str], fmt: str) -> list[np.ndarray]:
     if len(shapes) > 1:
         raise VideoError(
             "the frames have different sizes (" + ", ".join(f"{s[1]}x{s[0]}" for s in sorted(shapes))
-            + "); render them all with the same --resolution"
+            + "); render them all at the same resolution"
         )
     return images
 
