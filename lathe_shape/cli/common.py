@@ -5,10 +5,15 @@ and the progress bar.
 The convention (the README's "Command line" section):
 
 * ``-o/--output DIR`` -- the folder that receives everything a command
-  writes, created if missing;
+  writes, created if missing (``lathe-render``: the current folder;
+  ``lathe-turntable`` / ``lathe-compare``: ``SCENE_turntable`` /
+  ``SCENE_compare`` in the current folder);
 * ``--spp N``, ``--resolution WxH`` (or ``N`` for a square), ``--seed S``;
 * ``--variant NAME`` -- the Mitsuba variant (default ``llvm_ad_rgb``);
 * ``-D KEY=VALUE`` -- set an XML ``<default>``, as Mitsuba's own CLI does.
+
+A user error prints ``PROG: error: MESSAGE`` (no traceback) and exits with
+status 2; Ctrl-C exits with status 130 after a one-line message.
 """
 
 from __future__ import annotations
