@@ -8,7 +8,8 @@
 Each time is the best of --repeat renders after one warm-up render (which
 pays the JIT compilation).
 
-    python scripts/bench_polyline.py [--res 256] [--spp 16] [--max-depth 8] [--variant llvm_ad_rgb]
+    python scripts/bench_polyline.py [--resolution 256x256] [--spp 16] [--max-depth 8] [--repeat 3]
+                                     [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.tools.bench import bench_arguments, best_render_time, load_with_profile
+from lathe_shape.tools.bench import bench_arguments, bench_scene, best_render_time
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,21 +46,21 @@ def goblet_profile(segments: int) -> np.ndarray:
 
 def main() -> None:
     args = bench_arguments(__doc__.splitlines()[0])
-    from lathe_shape.plugin.shape import LatheShape
+    from lathe_shape.plugin.shape import scene_lathes
 
-    defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth)}
+    width, height = args.size
     path_int = mi.load_dict({"type": "path", "max_depth": args.max_depth})
     exact_int = mi.load_dict({"type": "lathe_path", "max_depth": args.max_depth})
-    print(f"variant {args.variant}, {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, "
+    print(f"variant {args.variant}, {width}x{height}, {args.spp} spp, max_depth {args.max_depth}, "
           f"best of {args.repeat}")
 
     print("\n1) exact lathe vs reference mesh (mesh_segments 2048)")
     print(f"{'scene':<15}{'segments':>9}{'mesh path [s]':>15}{'lathe_path [s]':>16}{'exact/mesh':>12}")
     for name in ("wine_glass", "sundae_cup", "brandy_bottle"):
-        scene = mi.load_file(str(ROOT / "scenes" / f"{name}.xml"), mesh_segments="2048", **defines)
-        lathe = next(s for s in scene.shapes() if isinstance(s, LatheShape))
-        t_mesh, _ = best_render_time(scene, path_int, args.spp, args.repeat)
-        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat)
+        scene = bench_scene(args, ROOT / "scenes" / f"{name}.xml", mesh_segments="2048")
+        lathe = scene_lathes(scene)[0]
+        t_mesh, _ = best_render_time(scene, path_int, args.spp, args.repeat, args.seed)
+        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat, args.seed)
         print(f"{name:<15}{lathe.profile.segment_count:>9}{t_mesh:>15.3f}{t_exact:>16.3f}"
               f"{t_exact / t_mesh:>11.2f}x", flush=True)
 
@@ -67,12 +68,11 @@ def main() -> None:
     print(f"{'segments':>9}{'lathe_path [s]':>16}{'vs 31':>9}")
     base = None
     for segments in (31, 86, 300, 1000):
-        scene = load_with_profile(ROOT / "scenes" / "wine_glass.xml", goblet_profile(segments),
-                                  mesh_segments="64", **defines)
-        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat)
+        scene = bench_scene(args, ROOT / "scenes" / "wine_glass.xml", goblet_profile(segments),
+                            mesh_segments="64")
+        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat, args.seed)
         base = base or t_exact
         print(f"{segments:>9}{t_exact:>16.3f}{t_exact / base:>8.2f}x", flush=True)
-
 
 
 if __name__ == "__main__":

@@ -7,7 +7,8 @@ the wine_glass scene with the same spp, seed and max_depth. Prints each
 method's time, the spline/polyline time ratio (paper: about 18x; target
 <= 1.5x) and the image difference to the exact spline render.
 
-    python scripts/bench_spline.py [--res 256] [--spp 16] [--max-depth 8]
+    python scripts/bench_spline.py [--resolution 256x256] [--spp 16] [--max-depth 8] [--repeat 3]
+                                   [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.tools.bench import bench_arguments, best_render_time, load_with_profile
+from lathe_shape.tools.bench import bench_arguments, bench_scene, best_render_time
+from lathe_shape.tools.images import relative_error
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS_SCENE = ROOT / "scenes" / "wine_glass.xml"
@@ -35,22 +37,21 @@ def main() -> None:
     from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
 
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")
-    defines = {"res": str(args.res), "spp": str(args.spp), "max_depth": str(args.max_depth),
-               "mesh_segments": "64"}
+    width, height = args.size
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": args.max_depth})
-    print(f"variant {args.variant}, {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, "
+    print(f"variant {args.variant}, {width}x{height}, {args.spp} spp, max_depth {args.max_depth}, "
           f"best of {args.repeat}; spline glass of {spline.segment_count} segments")
 
-    spline_scene = load_with_profile(GLASS_SCENE, SPLINE_GLASS, "bspline", **defines)
-    t_spline, img_spline = best_render_time(spline_scene, integrator, args.spp, args.repeat)
+    spline_scene = bench_scene(args, GLASS_SCENE, SPLINE_GLASS, "bspline", mesh_segments="64")
+    t_spline, img_spline = best_render_time(spline_scene, integrator, args.spp, args.repeat, args.seed)
     print(f"\n{'profile':<28}{'segments':>9}{'time [s]':>10}{'spline/this':>13}{'rel. error':>12}")
     print(f"{'exact B-spline':<28}{spline.segment_count:>9}{t_spline:>10.3f}{1.0:>12.2f}x{0.0:>12.4f}")
     for segments in (31, 86):
         for method in ("adaptive", "uniform"):
             poly = to_polyline(spline.segment_controls, segments + 1, method)
-            poly_scene = load_with_profile(GLASS_SCENE, poly, "polyline", **defines)
-            t_poly, img_poly = best_render_time(poly_scene, integrator, args.spp, args.repeat)
-            err = np.abs(img_poly - img_spline).mean() / img_spline.mean()
+            poly_scene = bench_scene(args, GLASS_SCENE, poly, "polyline", mesh_segments="64")
+            t_poly, img_poly = best_render_time(poly_scene, integrator, args.spp, args.repeat, args.seed)
+            err = relative_error(img_poly, img_spline)
             print(f"{method + ' polyline':<28}{segments:>9}{t_poly:>10.3f}{t_spline / t_poly:>12.2f}x"
                   f"{err:>12.4f}", flush=True)
     print("\nrel. error = mean |polyline - spline| / mean spline, same seed (correlated noise)")

@@ -6,7 +6,8 @@ import subprocess
 import sys
 
 import numpy as np
-from conftest import SCENES, VARIANT
+import pytest
+from conftest import ROOT, SCENES, VARIANT
 
 from lathe_shape.tools.images import read_exr
 
@@ -82,3 +83,31 @@ def test_more_errors(tmp_path):
     bad.write_text(NO_INTEGRATOR.replace("0 0, 1 0, 1 2, 0 2", "0 0, 1 0, 1 2, 0.5 2"))
     res = run_cli(str(bad), "--resolution", "8x8", "-o", str(tmp_path))
     assert res.returncode == 2 and f"At {bad} (line" in res.stderr and "profile is not closed" in res.stderr
+
+
+COMMANDS = ["lathe_shape.cli.render", "lathe_shape.cli.turntable", "lathe_shape.cli.compare"]
+SCRIPTS = ["bench_polyline.py", "bench_spline.py", "furnace.py", "validate_against_mesh.py"]
+
+
+@pytest.mark.parametrize("command", COMMANDS + SCRIPTS)
+def test_help(command):
+    """Every command's and script's --help runs (and names the shared options)."""
+    where = ["-m", command] if command in COMMANDS else [str(ROOT / "scripts" / command)]
+    result = subprocess.run([sys.executable, *where, "--variant", VARIANT, "--help"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    for option in ("--spp", "--resolution", "--variant"):
+        assert option in result.stdout
+
+
+def test_default_output_folders(tmp_path, monkeypatch):
+    """Without -o, lathe-turntable and lathe-compare write to SCENE_turntable
+    and SCENE_compare in the current folder."""
+    from lathe_shape.cli import compare, turntable
+
+    monkeypatch.chdir(tmp_path)
+    small = ["--variant", VARIANT, "--spp", "1", "--resolution", "12x10", "-D", "mesh_segments=16"]
+    assert turntable.main([str(SCENES / "wine_glass.xml"), "--count", "1", *small]) == 0
+    assert (tmp_path / "wine_glass_turntable" / "frame_0000.exr").is_file()
+    assert compare.main([str(SCENES / "wine_glass.xml"), *small]) == 0
+    assert (tmp_path / "wine_glass_compare" / "diff.png").is_file()

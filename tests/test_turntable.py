@@ -13,9 +13,11 @@ import mitsuba as mi
 import numpy as np
 import OpenEXR
 import pytest
-from conftest import SCENES
+from conftest import SCENES, VARIANT
 
-from lathe_shape.cli.turntable import main
+from lathe_shape.cli.common import CliError
+from lathe_shape.cli.turntable import main, parse_frames
+from lathe_shape.tools import frames, poses
 from lathe_shape.tools import turntable as tt
 from lathe_shape.tools.images import read_exr
 from lathe_shape.tools.scenes import load_scene
@@ -71,7 +73,8 @@ def prism(tmp_path) -> str:
 
 
 def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
+    """``lathe-turntable ARGS`` in-process, in the test suite's variant."""
+    code = main(["--variant", VARIANT, *args])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
 
@@ -88,55 +91,55 @@ def pixels(folder, index: int) -> np.ndarray:
 
 
 def test_parse_frames():
-    assert tt.parse_frames(None, 24) == range(24)
-    assert tt.parse_frames("0:12", 24) == range(0, 12)
-    assert tt.parse_frames("12:", 24) == range(12, 24)
-    assert tt.parse_frames(":5", 24) == range(0, 5)
-    assert tt.parse_frames("7", 24) == range(7, 8)
-    assert tt.parse_frames("20:30", 24) == range(20, 24)  # clipped like a slice
+    assert parse_frames(None, 24) == range(24)
+    assert parse_frames("0:12", 24) == range(0, 12)
+    assert parse_frames("12:", 24) == range(12, 24)
+    assert parse_frames(":5", 24) == range(0, 5)
+    assert parse_frames("7", 24) == range(7, 8)
+    assert parse_frames("20:30", 24) == range(20, 24)  # clipped like a slice
     for bad, message in [("a:b", "integers"), ("1:2:3", "no step"), ("5:5", "selects no frame"),
                          ("30:40", "selects no frame"), ("-1:3", "must not be negative"), (":", None)]:
         if message is None:
-            assert tt.parse_frames(bad, 4) == range(4)
+            assert parse_frames(bad, 4) == range(4)
             continue
-        with pytest.raises(tt.TurntableError, match=message):
-            tt.parse_frames(bad, 24)
-    with pytest.raises(tt.TurntableError, match="--count must be at least 1"):
-        tt.parse_frames(None, 0)
+        with pytest.raises(CliError, match=message):
+            parse_frames(bad, 24)
+    with pytest.raises(CliError, match="--count must be at least 1"):
+        parse_frames(None, 0)
 
 
 def test_plan_frames(tmp_path):
-    plan = tt.plan_frames(8, range(2, 4), tmp_path, seed=10)
+    plan = frames.plan_frames(8, range(2, 4), tmp_path, seed=10)
     assert [f.index for f in plan] == [2, 3] and [f.seed for f in plan] == [12, 13]
     assert [f.angle_deg for f in plan] == [90.0, 135.0]
     assert plan[0].exr == str(tmp_path / "frame_0002.exr") and plan[0].png.endswith("frame_0002.png")
-    assert tt.plan_frames(12345, [7], tmp_path)[0].exr.endswith("frame_00007.exr")
+    assert frames.plan_frames(12345, [7], tmp_path)[0].exr.endswith("frame_00007.exr")
 
 
 def test_transforms():
     # A tilted, moved lathe frame (rigid).
-    tilt = tt.rotation_about_axis(np.zeros(3), [1.0, 0.3, 0.0], 25.0)
+    tilt = poses.rotation_about_axis(np.zeros(3), [1.0, 0.3, 0.0], 25.0)
     lathe = tilt.copy()
     lathe[:3, 3] = [1.0, -2.0, 0.5]
-    origin, axis = tt.lathe_axis(lathe)
+    origin, axis = poses.lathe_axis(lathe)
     np.testing.assert_allclose(origin, [1.0, -2.0, 0.5])
     np.testing.assert_allclose(axis, tilt[:3, 2])
-    np.testing.assert_array_equal(tt.rotate_z(360.0), np.eye(4))
-    np.testing.assert_array_equal(tt.rotation_about_axis(origin, axis, 0.0), np.eye(4))
+    np.testing.assert_array_equal(poses.rotate_z(360.0), np.eye(4))
+    np.testing.assert_array_equal(poses.rotation_about_axis(origin, axis, 0.0), np.eye(4))
 
-    spun = tt.spin_matrix(lathe, 70.0)
+    spun = poses.spin_matrix(lathe, 70.0)
     np.testing.assert_allclose(spun[:3, 3], lathe[:3, 3])  # spins in place
     np.testing.assert_allclose(spun[:3, 2], lathe[:3, 2])  # about its own axis
     assert not np.allclose(spun, lathe)
     # Points on the axis stay put under the world-space rotation.
-    rot = tt.rotation_about_axis(origin, axis, 33.0)
+    rot = poses.rotation_about_axis(origin, axis, 33.0)
     on_axis = np.append(origin + 2.5 * axis, 1.0)
     np.testing.assert_allclose(rot @ on_axis, on_axis, atol=1e-12)
 
     # Orbiting the camera shows the lathe from the same side as spinning it.
     camera = np.eye(4)
     camera[:3, 3] = [0.0, -10.0, 3.0]
-    orbit = tt.orbit_matrix(camera, lathe, 70.0)
+    orbit = poses.orbit_matrix(camera, lathe, 70.0)
     np.testing.assert_allclose(np.linalg.inv(orbit) @ lathe, np.linalg.inv(camera) @ spun, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(orbit[:3, 3] - origin), np.linalg.norm(camera[:3, 3] - origin))
 
@@ -150,7 +153,7 @@ def test_lathes_in_file_order(tmp_path):
         path = tmp_path / "order.xml"
         path.write_text(f'<scene version="3.0.0"><shape type="rectangle" id="r"/>{body}</scene>')
         scene = mi.load_file(str(path))
-        assert [s.id() for s in tt.scene_lathes(scene, path)] == ids
+        assert [s.id() for s in tt.lathes_in_file_order(scene, path)] == ids
 
 
 # -- rendering ----------------------------------------------------------------
@@ -293,7 +296,8 @@ def test_ctrl_c_subprocess(tmp_path):
     """A real SIGINT: exit 130, no traceback, no half-written frame."""
     out = tmp_path / "turn"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "lathe_shape.cli.turntable", WINE, "-o", str(out), "--count", "1000", *FAST],
+        [sys.executable, "-m", "lathe_shape.cli.turntable", "--variant", VARIANT, WINE, "-o", str(out),
+         "--count", "1000", *FAST],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     deadline = time.monotonic() + 60
@@ -367,8 +371,37 @@ def test_errors(tmp_path, capsys, prism, monkeypatch):
 
 def test_help(capsys):
     with pytest.raises(SystemExit) as e:
-        main(["--help"])
+        main(["--variant", VARIANT, "--help"])
     assert e.value.code == 0
     text = capsys.readouterr().out
     for option in ("--count", "--frames", "--object", "--orbit", "--gif", "--mp4", "--fps", "-D"):
         assert option in text
+
+
+def test_mp4_writer_pads_and_renames(tmp_path, capsys, monkeypatch):
+    """The MP4 path without ffmpeg: a stand-in imageio_ffmpeg records the
+    frames; odd sizes are padded to even ones and the file appears only
+    when complete."""
+    out = tmp_path / "turn"
+    odd = [*FAST[:2], "--resolution", "25x15", *FAST[4:]]
+    assert run(capsys, WINE, "-o", str(out), "--count", "2", *odd)[0] == 0
+    sent = []
+
+    def write_frames(path, size, **options):  # imageio_ffmpeg's generator protocol
+        assert os.path.basename(path).startswith(".") and not (out / "turntable.mp4").exists()
+        sent.append(size)
+        with open(path, "wb") as f:
+            while True:
+                image = yield  # the first send(None) only starts the generator
+                sent.append(image.shape)
+                f.write(b"frame")
+
+    fake = type(sys)("imageio_ffmpeg")
+    fake.write_frames = write_frames
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", fake)
+    code, stdout, stderr = run(capsys, WINE, "-o", str(out), "--count", "2", "--mp4", *odd)
+    assert code == 0, stderr
+    assert "rendered 0 frame(s), skipped 2" in stdout and "turntable.mp4 (2 frames, 12 fps)" in stdout
+    assert sent == [(26, 16), (16, 26, 3), (16, 26, 3)]
+    assert (out / "turntable.mp4").read_bytes() == b"frame" * 2
+    assert not [p for p in os.listdir(out) if p.startswith(".")]

@@ -5,10 +5,15 @@ and the progress bar.
 The convention (the README's "Command line" section):
 
 * ``-o/--output DIR`` -- the folder that receives everything a command
-  writes, created if missing;
+  writes, created if missing (``lathe-render``: the current folder;
+  ``lathe-turntable`` / ``lathe-compare``: ``SCENE_turntable`` /
+  ``SCENE_compare`` in the current folder);
 * ``--spp N``, ``--resolution WxH`` (or ``N`` for a square), ``--seed S``;
 * ``--variant NAME`` -- the Mitsuba variant (default ``llvm_ad_rgb``);
 * ``-D KEY=VALUE`` -- set an XML ``<default>``, as Mitsuba's own CLI does.
+
+A user error prints ``PROG: error: MESSAGE`` (no traceback) and exits with
+status 2; Ctrl-C exits with status 130 after a one-line message.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ __all__ = [
     "add_output_option",
     "add_render_options",
     "check_at_least",
+    "command_parser",
     "format_duration",
     "is_interrupt",
     "open_scene",
@@ -36,6 +42,7 @@ __all__ = [
     "parse_resolution",
     "root_message",
     "run_command",
+    "select_variant",
 ]
 
 #: The variant every command uses unless ``--variant`` says otherwise.
@@ -47,29 +54,51 @@ class CliError(Exception):
     exits with status 2, without a traceback."""
 
 
-def add_output_option(parser: argparse.ArgumentParser, default: str | None = "out", what: str = "") -> None:
-    """``-o/--output DIR``: the folder for everything the command writes."""
-    where = f"default: {default}" if default else "required"
+def command_parser(prog: str, description: str,
+                   scene_help: str = "Mitsuba XML scene file") -> argparse.ArgumentParser:
+    """The parser of a command that takes one scene file as its first argument."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument("scene", help=scene_help)
+    return parser
+
+
+def add_output_option(parser: argparse.ArgumentParser, default: str | None = "out", what: str = "",
+                      default_help: str | None = None) -> None:
+    """``-o/--output DIR``: the folder for everything the command writes.
+
+    ``default_help`` describes a default the command computes itself (e.g.
+    from the scene's name): the option is then optional, ``None`` when not
+    given, whatever ``default`` says."""
+    if default_help is not None:
+        default, where = None, f"default: {default_help}"
+    else:
+        where = f"default: {default}" if default else "required"
     parser.add_argument(
-        "-o", "--output", metavar="DIR", default=default, required=default is None,
+        "-o", "--output", metavar="DIR", default=default,
+        required=default is None and default_help is None,
         help=f"output folder, created if missing{': ' + what if what else ''} ({where})",
     )
 
 
 def add_render_options(parser: argparse.ArgumentParser, seed_help: str = "sampler seed (default: 0)",
-                       spp_default: int | None = None) -> None:
-    """``--spp``, ``--resolution``, ``--seed``, ``--variant`` and ``-D``."""
-    spp_help = f"default: {spp_default}" if spp_default else "default: the scene's sampler"
-    parser.add_argument("--spp", type=int, default=spp_default, help=f"samples per pixel ({spp_help})")
-    parser.add_argument("--resolution", metavar="WxH",
-                        help="film resolution, e.g. 640x480, or 512 for a square (default: the scene's)")
-    parser.add_argument("--seed", type=int, default=0, help=seed_help)
+                       spp_default: int | None = None, resolution_default: str | None = None,
+                       defines: bool = True, seed_default: int = 0) -> None:
+    """``--spp``, ``--resolution``, ``--seed``, ``--variant`` and (unless
+    ``defines`` is False, for scenes built in Python) ``-D``."""
+    spp_help = spp_default or "the scene's sampler"
+    size_help = resolution_default or "the scene's film"
+    parser.add_argument("--spp", type=int, default=spp_default,
+                        help=f"samples per pixel (default: {spp_help})")
+    parser.add_argument("--resolution", metavar="WxH", default=resolution_default,
+                        help=f"film resolution, e.g. 640x480, or 512 for a square (default: {size_help})")
+    parser.add_argument("--seed", type=int, default=seed_default, help=seed_help)
     parser.add_argument("--variant", default=DEFAULT_VARIANT,
                         help=f"Mitsuba variant (default: {DEFAULT_VARIANT})")
-    parser.add_argument(
-        "-D", dest="defines", action="append", metavar="KEY=VALUE",
-        help="set an XML <default> parameter, e.g. -D integrator=lathe_path (repeatable)",
-    )
+    if defines:
+        parser.add_argument(
+            "-D", dest="defines", action="append", metavar="KEY=VALUE",
+            help="set an XML <default> parameter, e.g. -D integrator=lathe_path (repeatable)",
+        )
 
 
 def check_at_least(option: str, value: float | None, minimum: float) -> None:
@@ -123,19 +152,12 @@ def is_interrupt(error: BaseException | None) -> bool:
     return False
 
 
-def open_scene(
-    path: str | os.PathLike,
-    variant: str,
-    defines: list[str] | None = None,
-    resolution: str | None = None,
-    extra_defines: dict[str, str] | None = None,
-) -> object:
-    """What every command-line tool does first: select ``variant``, register
-    the plugins, parse ``-D key=value`` items and a ``WxH`` resolution, load
-    the scene. Raises :class:`SceneError` with a clear message."""
+def select_variant(variant: str) -> None:
+    """Select the Mitsuba ``variant`` and register the package's plugins for
+    it; raises :class:`SceneError` naming the available variants."""
     import mitsuba as mi
 
-    from ..tools.scenes import SceneError, load_scene
+    from ..tools.scenes import SceneError
 
     if variant not in mi.variants():
         raise SceneError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
@@ -146,6 +168,21 @@ def open_scene(
         lathe_shape.register()
     except (RuntimeError, ImportError) as e:
         raise SceneError(str(e)) from None
+
+
+def open_scene(
+    path: str | os.PathLike,
+    variant: str,
+    defines: list[str] | None = None,
+    resolution: str | None = None,
+    extra_defines: dict[str, str] | None = None,
+) -> object:
+    """What every command-line tool does first: select ``variant``, register
+    the plugins, parse ``-D key=value`` items and a ``WxH`` resolution, load
+    the scene. Raises :class:`SceneError` with a clear message."""
+    from ..tools.scenes import load_scene
+
+    select_variant(variant)
     values = parse_defines(defines)
     values.update(extra_defines or {})
     size = parse_resolution(resolution) if resolution else None

@@ -5,6 +5,8 @@ Example::
 
     lathe-compare scenes/wine_glass.xml -o out/compare --spp 64 --resolution 256x256
 
+(without ``-o``: the folder ``wine_glass_compare`` in the current folder).
+
 Both renders use the same sampler, seed and max_depth, and ``lathe_path``
 runs with ``normal_check none``, which draws random numbers exactly as
 ``path`` does: the two images' noise is correlated and the difference shows
@@ -24,28 +26,34 @@ import time
 
 import numpy as np
 
+from .common import (
+    CliError,
+    add_output_option,
+    add_render_options,
+    check_at_least,
+    command_parser,
+    run_command,
+)
+
 __all__ = ["main", "build_parser", "diverging_map", "difference_image"]
+
+PROG = "lathe-compare"
+
+#: The files written, in the output folder.
+FILES = ("exact.exr", "exact.png", "mesh.exr", "mesh.png", "diff.png")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="lathe-compare",
-        description="Render a scene with exact lathes (lathe_path) and as the reference mesh "
-                    "(path), same seed, and write both plus a false-colour difference.",
+    parser = command_parser(
+        PROG,
+        "Render a scene with exact lathes (lathe_path) and as the reference mesh "
+        "(path), same seed, and write both plus a false-colour difference.",
     )
-    parser.add_argument("scene", help="Mitsuba XML scene file")
-    parser.add_argument("-o", "--output", required=True, help="output folder (created if missing)")
-    parser.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
-    parser.add_argument("--resolution", metavar="WxH", help="override the film resolution, e.g. 256x256")
+    add_output_option(parser, what=", ".join(FILES), default_help="SCENE_compare in the current folder")
+    add_render_options(parser)
     parser.add_argument("--mesh-segments", type=int, metavar="N",
                         help="azimuthal steps of the reference mesh (sets -D mesh_segments=N and every "
                              "lathe's own parameter through the scene default)")
-    parser.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
-    parser.add_argument(
-        "-D", dest="defines", action="append", metavar="KEY=VALUE",
-        help="set an XML <default> parameter (repeatable)",
-    )
     return parser
 
 
@@ -105,66 +113,68 @@ def _scene_max_depth(scene) -> int | None:
     return None
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def open_comparison(args: argparse.Namespace) -> tuple[object, int, str]:
+    """Check the options, load the scene (which must have a sensor and a
+    lathe) and create the output folder; returns (scene, number of lathes,
+    folder)."""
+    from .common import open_scene, output_folder
+
+    check_at_least("--spp", args.spp, 1)
+    check_at_least("--mesh-segments", args.mesh_segments, 3)
+    extra = {} if args.mesh_segments is None else {"mesh_segments": str(args.mesh_segments)}
+    scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
+    from ..plugin.shape import scene_lathes  # (needs the variant open_scene selected)
+
+    if not scene.sensors():
+        raise CliError(f"{args.scene}: the scene has no sensor")
+    lathes = len(scene_lathes(scene))
+    if not lathes:
+        raise CliError(f"{args.scene}: the scene has no lathe shape to compare")
+    stem = os.path.splitext(os.path.basename(args.scene))[0]
+    return scene, lathes, output_folder(args.output or f"{stem}_compare")
+
+
+def render_both(args: argparse.Namespace, scene, out: str, spp: int, depth: int) -> dict[str, np.ndarray]:
+    """Render ``exact`` (lathe_path, normal_check none) and ``mesh`` (path)
+    with the same seed; writes each as EXR + PNG."""
     import mitsuba as mi
 
-    from ..tools.images import image_errors, write_exr, write_png
-    from ..tools.scenes import SceneError
-    from .common import CliError, open_scene, root_message
-    from .common import output_folder as check_output_folder
-
-    def fail(message: str) -> int:
-        print(f"lathe-compare: error: {message}", file=sys.stderr)
-        return 2
-
-    if args.spp is not None and args.spp < 1:
-        return fail(f"--spp must be at least 1, got {args.spp}")
-    if args.mesh_segments is not None and args.mesh_segments < 3:
-        return fail(f"--mesh-segments must be at least 3, got {args.mesh_segments}")
-    extra = {} if args.mesh_segments is None else {"mesh_segments": str(args.mesh_segments)}
-    try:
-        scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
-        out = check_output_folder(args.output)
-    except (SceneError, CliError) as e:
-        return fail(str(e))
-    if not scene.sensors():
-        return fail(f"{args.scene}: the scene has no sensor")
-    lathes = [s for s in scene.shapes() if hasattr(s, "ray_intersect_exact")]
-    if not lathes:
-        return fail(f"{args.scene}: the scene has no lathe shape to compare")
-
-    sensor = scene.sensors()[0]
-    width, height = sensor.film().size()
-    spp = args.spp or sensor.sampler().sample_count()
-    depth = _scene_max_depth(scene)
-    depth = -1 if depth is None else depth
-    exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": depth, "normal_check": "none"})
-    mesh_integrator = mi.load_dict({"type": "path", "max_depth": depth})
-    print(
-        f"lathe-compare: {args.scene} -> {out}\n"
-        f"  {width}x{height}, {spp} spp, max_depth {depth}, seed {args.seed}, variant {args.variant}, "
-        f"{len(lathes)} lathe(s)",
-        flush=True,
-    )
+    from ..tools.images import write_exr, write_png
 
     images = {}
-    runs = (("exact", "lathe_path", exact_integrator), ("mesh", "path", mesh_integrator))
-    for name, kind, integrator in runs:
+    runs = (("exact", {"type": "lathe_path", "max_depth": depth, "normal_check": "none"}),
+            ("mesh", {"type": "path", "max_depth": depth}))
+    for name, integrator in runs:
         start = time.perf_counter()
-        try:
-            rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
-        except RuntimeError as e:
-            return fail(root_message(e))
+        rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=mi.load_dict(integrator)).numpy()
         elapsed = time.perf_counter() - start
         images[name] = rgb
-        metadata = {"spp": int(spp), "integrator": kind, "seed": int(args.seed),
+        metadata = {"spp": int(spp), "integrator": integrator["type"], "seed": int(args.seed),
                     "variant": args.variant, "scene": os.path.abspath(args.scene),
                     "render_seconds": float(elapsed)}
         write_exr(os.path.join(out, f"{name}.exr"), rgb, metadata)
         write_png(os.path.join(out, f"{name}.png"), rgb)
-        print(f"  {name:<5} ({kind}) rendered in {elapsed:.2f} s", flush=True)
+        print(f"  {name:<5} ({integrator['type']}) rendered in {elapsed:.2f} s", flush=True)
+    return images
 
+
+def compare(args: argparse.Namespace) -> int:
+    import mitsuba as mi
+
+    from ..tools.images import image_errors
+
+    scene, lathes, out = open_comparison(args)
+    width, height = scene.sensors()[0].film().size()
+    spp = args.spp or scene.sensors()[0].sampler().sample_count()
+    depth = _scene_max_depth(scene)
+    depth = -1 if depth is None else depth
+    print(
+        f"{PROG}: {args.scene} -> {out}\n"
+        f"  {width}x{height}, {spp} spp, max_depth {depth}, seed {args.seed}, variant {args.variant}, "
+        f"{lathes} lathe(s)",
+        flush=True,
+    )
+    images = render_both(args, scene, out, spp, depth)
     diff_png, scale = difference_image(images["exact"], images["mesh"])
     mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.path.join(out, "diff.png"))
     err = image_errors(images["mesh"], images["exact"])
@@ -172,9 +182,12 @@ def main(argv: list[str] | None = None) -> int:
           f"{err['rel_rmse']:.4f}, max abs difference {err['max_abs']:.4f}, bias {err['bias']:+.4f}")
     print(f"  diff.png: luminance mesh - exact, blue -{scale:.3g} .. white 0 .. red +{scale:.3g} "
           f"(colour bar below the image)")
-    files = ("exact.exr", "exact.png", "mesh.exr", "mesh.png", "diff.png")
-    print(f"  wrote {', '.join(os.path.join(out, f) for f in files)}")
+    print(f"  wrote {', '.join(os.path.join(out, f) for f in FILES)}")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_command(PROG, build_parser(), compare, argv)
 
 
 if __name__ == "__main__":

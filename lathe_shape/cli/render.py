@@ -15,18 +15,17 @@ import os
 import sys
 import time
 
-from .common import add_output_option, add_render_options, run_command
+from .common import add_output_option, add_render_options, command_parser, run_command
 
 __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="lathe-render",
-        description="Render a Mitsuba 3 scene containing lathe shapes to EXR (+ PNG preview), "
-                    "named after the scene file.",
+    parser = command_parser(
+        "lathe-render",
+        "Render a Mitsuba 3 scene containing lathe shapes to EXR (+ PNG preview), "
+        "named after the scene file.",
     )
-    parser.add_argument("scene", help="Mitsuba XML scene file")
     add_output_option(parser, default=".", what="SCENE.exr and SCENE.png")
     add_render_options(parser)
     parser.add_argument("--no-png", action="store_true", help="do not write the PNG preview")

@@ -19,235 +19,296 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from .common import is_interrupt
+from .common import (
+    CliError,
+    ProgressBar,
+    add_output_option,
+    add_render_options,
+    check_at_least,
+    command_parser,
+    is_interrupt,
+    run_command,
+)
 
-__all__ = ["main", "build_parser"]
+if TYPE_CHECKING:  # imported where needed: --help needs no Mitsuba variant
+    from ..tools.frames import Frame
+    from ..tools.turntable import Turntable
+
+__all__ = ["main", "build_parser", "parse_frames"]
+
+PROG = "lathe-turntable"
+
+#: The animations ``--gif`` / ``--mp4`` write into the output folder.
+VIDEOS = ("gif", "mp4")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="lathe-turntable",
-        description=(
-            "Render a 360-degree turntable of a Mitsuba 3 scene with lathe shapes: the lathe spins "
-            "about its own axis (or, with --orbit, the camera orbits it). Writes frame_0000.exr "
-            "(linear, half float) + frame_0000.png (sRGB), ... to OUTDIR; finished frames are "
-            "skipped, so re-running an interrupted job resumes it."
-        ),
+    parser = command_parser(
+        PROG,
+        "Render a 360-degree turntable of a Mitsuba 3 scene with lathe shapes: the lathe spins "
+        "about its own axis (or, with --orbit, the camera orbits it). Writes frame_0000.exr "
+        "(linear, half float) + frame_0000.png (sRGB), ... to the output folder; finished frames "
+        "are skipped, so re-running an interrupted job resumes it.",
     )
-    parser.add_argument("scene", help="Mitsuba XML scene file")
-    parser.add_argument(
-        "-o", "--output", metavar="OUTDIR",
-        help="output folder, created if missing (default: SCENE_turntable next to the scene)",
-    )
-    parser.add_argument(
-        "--count", type=int, default=36, metavar="N", help="frames in the full turn (default: 36)"
-    )
+    add_output_option(parser, what="frame_NNNN.exr/.png, turntable.gif/.mp4",
+                      default_help="SCENE_turntable in the current folder")
+    parser.add_argument("--count", type=int, default=36, metavar="N",
+                        help="frames in the full turn (default: 36)")
     parser.add_argument(
         "--frames", metavar="START:STOP",
         help="render only frames START to STOP-1 (half-open, like a Python slice; either end may be "
         "left out) to split a job across processes or machines (default: all)",
     )
-    parser.add_argument(
-        "--object", metavar="ID",
-        help="id of the lathe to turn or orbit (default: the first lathe in the scene)",
-    )
+    parser.add_argument("--object", metavar="ID",
+                        help="id of the lathe to turn or orbit (default: the first lathe in the scene)")
     parser.add_argument(
         "--orbit", action="store_true",
         help="orbit the camera (the first sensor) about the lathe's axis instead of spinning the lathe",
     )
-    parser.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
-    parser.add_argument("--resolution", metavar="WxH", help="override the film resolution, e.g. 640x480")
-    parser.add_argument(
-        "--seed", type=int, default=0, help="base sampler seed; frame k uses SEED + k (default: 0)"
-    )
-    parser.add_argument(
-        "-D", dest="defines", action="append", metavar="KEY=VALUE",
-        help="set an XML <default> parameter, e.g. -D integrator=lathe_path (repeatable)",
-    )
+    add_render_options(parser, seed_help="base sampler seed; frame k uses SEED + k (default: 0)")
     parser.add_argument(
         "--threads", type=int, metavar="N",
         help="Dr.Jit worker threads (default: all cores); 1 makes LLVM renders bit-reproducible also with "
         "reconstruction filters wider than a pixel (e.g. gaussian), whose splats are summed in thread order",
     )
     parser.add_argument("--force", action="store_true", help="render finished frames again")
-    parser.add_argument(
-        "--gif", action="store_true", help="assemble all frames present into OUTDIR/turntable.gif"
-    )
-    parser.add_argument(
-        "--mp4", action="store_true", help="assemble all frames present into OUTDIR/turntable.mp4"
-    )
+    for fmt in VIDEOS:
+        parser.add_argument(f"--{fmt}", action="store_true",
+                            help=f"assemble all frames present into the output folder's turntable.{fmt}")
     parser.add_argument("--fps", type=float, default=12.0, help="GIF/MP4 frame rate (default: 12)")
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def parse_frames(text: str | None, count: int) -> range:
+    """``--frames`` -> the half-open range of frame indices to render.
+
+    ``"START:STOP"`` as in a Python slice (either end may be left out:
+    ``":12"``, ``"12:"``), or a single index ``"K"`` (that frame only).
+    ``STOP`` past the end is clipped to ``count``, so fixed-size shards such
+    as ``0:10 10:20 20:30`` cover 24 frames. Negative indices, steps and empty
+    ranges are errors (:class:`CliError`).
+    """
+    check_at_least("--count", count, 1)
+    if text is None:
+        return range(count)
+    parts = text.strip().split(":")
+    if len(parts) > 2:
+        raise CliError(f"--frames expects START:STOP (no step), got {text!r}")
     try:
-        return _run(args)
-    except (KeyboardInterrupt, RuntimeError) as e:
-        if not is_interrupt(e):
-            raise
-        print("lathe-turntable: interrupted", file=sys.stderr)
-        return 130
+        values = [int(p) if p.strip() else None for p in parts]
+    except ValueError:
+        raise CliError(f"--frames expects integers START:STOP, e.g. 0:12, got {text!r}") from None
+    if len(values) == 1:
+        if values[0] is None:
+            raise CliError(f"--frames expects START:STOP, e.g. 0:12, got {text!r}")
+        start, stop = values[0], values[0] + 1
+    else:
+        start = 0 if values[0] is None else values[0]
+        stop = count if values[1] is None else values[1]
+    if start < 0 or stop < 0:
+        raise CliError(f"--frames {text}: frame indices must not be negative")
+    stop = min(stop, count)
+    if start >= stop:
+        raise CliError(
+            f"--frames {text} selects no frame (the turn has frames 0 to {count - 1}; "
+            "the range is half-open: START:STOP renders START to STOP-1)"
+        )
+    return range(start, stop)
 
 
-def _run(args: argparse.Namespace) -> int:
-    # Imported here so that --help works without touching the JIT backends.
+@dataclass
+class Job:
+    """What one run renders: the posed scene and the settings every frame's
+    metadata records."""
 
-    from ..tools.scenes import SceneError
-    from ..tools.turntable import (
-        JOB_KEYS,
-        Frame,
-        Turntable,
-        TurntableError,
-        assemble_gif,
-        assemble_mp4,
-        frame_pngs,
-        frame_state,
-        integrator_name,
-        parse_frames,
-        plan_frames,
-        require_video,
-        write_frame,
-    )
-    from .common import CliError, ProgressBar, format_duration, open_scene, root_message
-    from .common import output_folder as check_output_folder
+    args: argparse.Namespace
+    turntable: Turntable
+    indices: range
+    out_dir: str
+    spp: int
+    size: tuple[int, int]
+    integrator: str
 
-    def fail(message: str) -> int:
-        print(f"lathe-turntable: error: {message}", file=sys.stderr)
-        return 2
+    def metadata(self, frame: Frame) -> dict[str, object]:
+        """The EXR header of ``frame`` (without its render time)."""
+        return {
+            "frame": frame.index,
+            "count": self.args.count,
+            "angle_deg": float(frame.angle_deg),
+            "spp": int(self.spp),
+            "integrator": self.integrator,
+            "seed": int(frame.seed),
+            "mode": self.turntable.mode,
+            "object": self.turntable.object_id,
+            "variant": self.args.variant,
+            "scene": os.path.abspath(self.args.scene),
+        }
 
-    if args.count < 1:
-        return fail(f"--count must be at least 1, got {args.count}")
-    if args.spp is not None and args.spp < 1:
-        return fail(f"--spp must be at least 1, got {args.spp}")
-    if args.threads is not None and args.threads < 1:
-        return fail(f"--threads must be at least 1, got {args.threads}")
+
+def open_job(args: argparse.Namespace) -> Job:
+    """Check the options, load and pose the scene, create the output folder
+    (last: a failed job leaves nothing behind)."""
+    from ..tools.scenes import integrator_name
+    from ..tools.turntable import Turntable
+    from ..tools.video import require_video
+    from .common import open_scene, output_folder
+
+    check_at_least("--count", args.count, 1)
+    check_at_least("--spp", args.spp, 1)
+    check_at_least("--threads", args.threads, 1)
     if not args.fps > 0:
-        return fail(f"--fps must be positive, got {args.fps:g}")
-    mode = "orbit" if args.orbit else "rotate"
-    output = args.output or os.path.splitext(args.scene)[0] + "_turntable"
-    try:
-        indices = parse_frames(args.frames, args.count)
-        require_video(args.gif, args.mp4)
-        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
-        turntable = Turntable(scene, mode, args.object, scene_path=args.scene)
-        out_dir = check_output_folder(output)
-    except (SceneError, CliError, TurntableError, RuntimeError, ImportError) as e:
-        return fail(str(e))
-
+        raise CliError(f"--fps must be positive, got {args.fps:g}")
+    indices = parse_frames(args.frames, args.count)
+    for fmt in VIDEOS:
+        if getattr(args, fmt):
+            require_video(fmt, what=f"--{fmt}")
+    scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
+    turntable = Turntable(scene, "orbit" if args.orbit else "rotate", args.object, scene_path=args.scene)
+    stem = os.path.splitext(os.path.basename(args.scene))[0]
+    out_dir = output_folder(args.output or f"{stem}_turntable")
     sensor = turntable.sensor
-    width, height = (int(v) for v in sensor.film().size())
+    size = tuple(int(v) for v in sensor.film().size())
     spp = args.spp or sensor.sampler().sample_count()
-    integrator = integrator_name(turntable.integrator)
+    return Job(args, turntable, indices, out_dir, spp, size, integrator_name(turntable.integrator))
+
+
+def describe(job: Job) -> None:
+    """Print what the job renders."""
+    args, turntable = job.args, job.turntable
     label = f"'{turntable.object_id}'" if turntable.object_id else "(without id)"
-    if mode == "rotate":
+    if turntable.mode == "rotate":
         what = f"lathe {label} spins about its axis"
     elif turntable.lathe is not None:
         what = f"camera orbits lathe {label}"
     else:
         what = "camera orbits the world z axis (no lathe in the scene)"
-    shard = "" if len(indices) == args.count else f", frames {indices.start}:{indices.stop}"
+    shard = "" if len(job.indices) == args.count else f", frames {job.indices.start}:{job.indices.stop}"
+    threads = "" if args.threads is None else f", {args.threads} thread(s)"
     print(
-        f"lathe-turntable: {args.scene} -> {out_dir}{os.sep}\n"
+        f"{PROG}: {args.scene} -> {job.out_dir}{os.sep}\n"
         f"  {what}: {args.count} frames of {360.0 / args.count:g} deg{shard}\n"
-        f"  {width}x{height}, {spp} spp, integrator {integrator}, variant {args.variant}, "
-        f"seed {args.seed} + frame" + ("" if args.threads is None else f", {args.threads} thread(s)"),
+        f"  {job.size[0]}x{job.size[1]}, {job.spp} spp, integrator {job.integrator}, variant {args.variant}, "
+        f"seed {args.seed} + frame{threads}",
         flush=True,
     )
 
-    def job_metadata(frame: Frame) -> dict[str, object]:
-        return {
-            "frame": frame.index,
-            "count": args.count,
-            "angle_deg": float(frame.angle_deg),
-            "spp": int(spp),
-            "integrator": integrator,
-            "seed": int(frame.seed),
-            "mode": mode,
-            "object": turntable.object_id,
-            "variant": args.variant,
-            "scene": os.path.abspath(args.scene),
-        }
 
-    frames = plan_frames(args.count, indices, out_dir, args.seed)
+def _expected(job: Job, frame: Frame) -> dict[str, object]:
+    """The header values a finished frame of this job must carry."""
+    from ..tools.frames import JOB_KEYS
+
+    return {k: v for k, v in job.metadata(frame).items() if k in JOB_KEYS}
+
+
+def pending_frames(job: Job, frames: list[Frame]) -> list[Frame]:
+    """The frames still to render (all with ``--force``); says how many were
+    skipped as finished or are rendered again as another job's."""
+    from ..tools.frames import frame_state
+
     todo, stale = [], 0
     for frame in frames:
-        expect = {k: v for k, v in job_metadata(frame).items() if k in JOB_KEYS}
-        state = "missing" if args.force else frame_state(frame, expect, (width, height))
+        state = "missing" if job.args.force else frame_state(frame, _expected(job, frame), job.size)
         if state != "done":
-            todo.append((frame, expect))
+            todo.append(frame)
         stale += state == "stale"
     skipped = len(frames) - len(todo)
-    if skipped or stale:
-        notes = [f"{skipped} finished frame(s) skipped"] if skipped else []
-        if stale:
-            notes.append(f"{stale} frame(s) of a different job (count, spp, seed, ...) rendered again")
+    notes = [f"{skipped} finished frame(s) skipped"] if skipped else []
+    if stale:
+        notes.append(f"{stale} frame(s) of a different job (count, spp, seed, ...) rendered again")
+    if notes:
         print("  " + "; ".join(notes), flush=True)
+    return todo
 
+
+def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
+    """Render and write the frames of ``todo``, advancing ``progress``
+    (skipping those another process on the same folder finished meanwhile)."""
+    from ..tools.frames import frame_state, write_frame
+
+    if todo:
+        progress.show()
+    for frame in todo:
+        if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
+            progress.advance(None)
+            continue
+        start = time.perf_counter()
+        rgb = job.turntable.render(frame.angle_deg, spp=job.spp, seed=frame.seed)
+        seconds = time.perf_counter() - start
+        try:
+            write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)})
+        except OSError as e:
+            raise CliError(f"cannot write frame: {e}") from None
+        progress.advance(seconds)
+
+
+def render_job(job: Job) -> int:
+    """Render the job's pending frames with a progress bar and the requested
+    thread count; returns 130 (with a one-line message) on Ctrl-C."""
     import drjit as dr
 
+    from ..tools.frames import plan_frames
+    from .common import format_duration
+
+    frames = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed)
+    todo = pending_frames(job, frames)
+    progress = ProgressBar(len(frames), done=len(frames) - len(todo))
     threads = dr.thread_count()
-    if args.threads is not None:
-        dr.set_thread_count(args.threads)  # restored below: main() may be called in-process
+    if job.args.threads is not None:
+        dr.set_thread_count(job.args.threads)  # restored below: main() may be called in-process
     start = time.perf_counter()
-    rendered = 0
-    progress = ProgressBar(len(frames), done=skipped)
     try:
-        if todo:
-            progress.show()
-        for frame, expect in todo:
-            # Another process working on the same folder may have finished it.
-            if not args.force and frame_state(frame, expect, (width, height)) == "done":
-                skipped += 1
-                progress.advance(None)
-                continue
-            t0 = time.perf_counter()
-            rgb = turntable.render(frame.angle_deg, spp=spp, seed=frame.seed)
-            seconds = time.perf_counter() - t0
-            write_frame(frame, rgb, {**job_metadata(frame), "render_seconds": float(seconds)})
-            rendered += 1
-            progress.advance(seconds)
-    except (KeyboardInterrupt, RuntimeError) as e:
-        progress.close()
+        render_frames(job, todo, progress)
+    except BaseException as e:
+        progress.close()  # end the bar's line before any message
         if not is_interrupt(e):
-            return fail(root_message(e))
-        print(
-            f"lathe-turntable: interrupted after {rendered} rendered frame(s); "
-            "run the same command again to resume",
-            file=sys.stderr,
-        )
+            raise
+        print(f"{PROG}: interrupted after {progress.rendered} rendered frame(s); "
+              "run the same command again to resume", file=sys.stderr)
         return 130
-    except OSError as e:
-        progress.close()
-        return fail(f"cannot write frame: {e}")
     finally:
-        if args.threads is not None:
+        if job.args.threads is not None:
             dr.set_thread_count(threads)
     progress.close()
     elapsed = time.perf_counter() - start
     print(
-        f"  rendered {rendered} frame(s), skipped {skipped} already done, "
+        f"  rendered {progress.rendered} frame(s), skipped {len(frames) - progress.rendered} already done, "
         f"in {elapsed:.2f} s{'' if elapsed < 60 else ' (' + format_duration(elapsed) + ')'}; "
-        f"output folder {out_dir}",
+        f"output folder {job.out_dir}",
         flush=True,
     )
-
-    for wanted, name, assemble in ((args.gif, "turntable.gif", assemble_gif),
-                                   (args.mp4, "turntable.mp4", assemble_mp4)):
-        if not wanted:
-            continue
-        pngs = frame_pngs(out_dir, args.count)
-        path = os.path.join(out_dir, name)
-        try:
-            assemble(pngs, path, args.fps)
-        except TurntableError as e:
-            return fail(str(e))
-        partial = "" if len(pngs) == args.count else f" of {args.count}"
-        print(f"  wrote {path} ({len(pngs)}{partial} frames, {args.fps:g} fps)", flush=True)
     return 0
+
+
+def write_videos(job: Job) -> None:
+    """Assemble the frames present in the output folder into the requested
+    animations."""
+    from ..tools.frames import frame_pngs
+    from ..tools.video import write_video
+
+    for fmt in VIDEOS:
+        if not getattr(job.args, fmt):
+            continue
+        pngs = frame_pngs(job.out_dir, job.args.count)
+        path = os.path.join(job.out_dir, f"turntable.{fmt}")
+        write_video(pngs, path, job.args.fps)
+        partial = "" if len(pngs) == job.args.count else f" of {job.args.count}"
+        print(f"  wrote {path} ({len(pngs)}{partial} frames, {job.args.fps:g} fps)", flush=True)
+
+
+def turntable(args: argparse.Namespace) -> int:
+    job = open_job(args)
+    describe(job)
+    status = render_job(job)
+    if status == 0:
+        write_videos(job)
+    return status
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_command(PROG, build_parser(), turntable, argv)
 
 
 if __name__ == "__main__":

@@ -9,13 +9,14 @@ and below 1 (speckles).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["FurnaceResult", "furnace_scene", "run_furnace"]
+__all__ = ["FURNACE_PROFILE", "FurnaceResult", "furnace_scene", "furnace_table", "glass_mask", "run_furnace"]
 
 #: A thick-walled glass with a rounded rim (closed profile, both ends on axis).
 FURNACE_PROFILE = (
@@ -26,12 +27,14 @@ FURNACE_PROFILE = (
 
 def furnace_scene(
     integrator: dict | None = None,
-    resolution: int = 64,
+    resolution: int | tuple[int, int] = 64,
     bsdf: dict | None = None,
     profile: str = FURNACE_PROFILE,
     smooth: bool = True,
 ) -> mi.Scene:
-    """A lathe glass alone under a uniform white environment."""
+    """A lathe glass alone under a uniform white environment; ``resolution``
+    is the film's (width, height), or one number for a square."""
+    width, height = (resolution, resolution) if isinstance(resolution, int) else resolution
     return mi.load_dict({
         "type": "scene",
         "integrator": integrator or {"type": "lathe_path", "max_depth": -1},
@@ -39,7 +42,7 @@ def furnace_scene(
             "type": "perspective",
             "fov": 30,
             "to_world": mi.ScalarTransform4f().look_at(origin=[0, -16, 6], target=[0, 0, 2.4], up=[0, 0, 1]),
-            "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+            "film": {"type": "hdrfilm", "width": width, "height": height,
                      "rfilter": {"type": "box"}},
         },
         "light": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}},
@@ -64,16 +67,18 @@ class FurnaceResult:
 
 
 def glass_mask(scene: mi.Scene) -> np.ndarray:
-    """Pixels whose centre ray hits the scene's lathe (exact intersection)."""
+    """Pixels whose centre ray hits one of the scene's lathes (exact
+    intersection)."""
+    from ..plugin.shape import scene_lathes
+
     sensor = scene.sensors()[0]
     width, height = sensor.film().size()
     idx = dr.arange(mi.UInt32, width * height)
     pos = mi.Point2f(mi.Float(idx % width) + 0.5, mi.Float(idx // width) + 0.5)
     ray, _ = sensor.sample_ray(0.0, 0.5, pos / mi.ScalarVector2f(width, height), mi.Point2f(0.5))
     hit = mi.Bool(False)
-    for shape in scene.shapes():
-        if hasattr(shape, "ray_intersect_exact"):
-            hit |= shape.ray_intersect_exact(ray).is_valid()
+    for lathe in scene_lathes(scene):
+        hit |= lathe.ray_intersect_exact(ray).is_valid()
     return hit.numpy().reshape(height, width)
 
 
@@ -90,3 +95,23 @@ def run_furnace(scene: mi.Scene, spp: int = 64, seed: int = 0,
         std=float(values.std()),
         pixels=int(mask.sum()),
     )
+
+
+def furnace_table(resolution: int | tuple[int, int] = 128, spp: int = 256,
+                  seed: int = 0) -> Iterator[tuple[str, FurnaceResult]]:
+    """(label, result) of every ``normal_check`` policy of ``lathe_path``
+    (eq. 11), then of two baselines: stock ``path`` on the reference mesh
+    (vertex normals), and the exact lathe with flat normals (nothing can
+    contradict them: lossless). All with ``max_depth -1``; yielded one by one
+    as they are rendered."""
+    from ..plugin.lathe_path import NORMAL_CHECKS
+
+    def lathe_path(**extra: str) -> mi.Integrator:
+        return mi.load_dict({"type": "lathe_path", "max_depth": -1, **extra})
+
+    scene = furnace_scene(resolution=resolution)
+    for policy in NORMAL_CHECKS:
+        yield policy, run_furnace(scene, spp, seed, lathe_path(normal_check=policy))
+    yield "path (mesh)", run_furnace(scene, spp, seed, mi.load_dict({"type": "path", "max_depth": -1}))
+    flat = furnace_scene(resolution=resolution, smooth=False)
+    yield "flat normals", run_furnace(flat, spp, seed, lathe_path())

@@ -1,5 +1,5 @@
-"""Loading scenes for the command-line tools: defines, resolution overrides,
-clear errors."""
+"""Scene files: loading with defines and resolution overrides (clear errors
+that name the file), and the edits the tools make to scene XML text."""
 
 from __future__ import annotations
 
@@ -11,12 +11,14 @@ import mitsuba as mi
 __all__ = [
     "SceneError",
     "integrator_name",
+    "lathe_ids",
     "load_scene",
     "load_string_in",
     "points_text",
     "replace_profile",
     "scene_integrator",
     "set_defaults",
+    "set_film_size",
 ]
 
 
@@ -31,11 +33,24 @@ def _parse_xml(xml_text: str, source: str) -> ET.Element:
         raise SceneError(f"{source}: not a valid XML file ({e})") from None
 
 
-def _override_film_size(xml_text: str, path: str, size: tuple[int, int]) -> str:
-    root = _parse_xml(xml_text, path)
+def _lathe_elements(root: ET.Element) -> list[ET.Element]:
+    """The ``<shape type="lathe">`` elements, in document order."""
+    return [e for e in root.iter("shape") if e.get("type") == "lathe"]
+
+
+def lathe_ids(xml_text: str, source: str = "scene") -> list[str]:
+    """Ids of the scene's ``<shape type="lathe">`` elements in document
+    order (``""`` for one without id)."""
+    return [e.get("id", "") for e in _lathe_elements(_parse_xml(xml_text, source))]
+
+
+def set_film_size(xml_text: str, size: tuple[int, int], source: str = "scene") -> str:
+    """The scene text with every sensor's film set to ``size`` = (width,
+    height) pixels."""
+    root = _parse_xml(xml_text, source)
     films = root.findall(".//sensor/film")
     if not films:
-        raise SceneError(f"{path}: no <sensor> with a <film> to set the resolution on")
+        raise SceneError(f"{source}: no <sensor> with a <film> to set the resolution on")
     for film in films:
         for name, value in zip(("width", "height"), size, strict=True):
             node = next((c for c in film if c.get("name") == name), None)
@@ -80,7 +95,7 @@ def replace_profile(
     if (points is None) == (filename is None):
         raise ValueError("replace_profile: give exactly one of points and filename")
     root = _parse_xml(xml_text, source)
-    lathes = [e for e in root.iter("shape") if e.get("type") == "lathe"]
+    lathes = _lathe_elements(root)
     if lathe_id is not None:
         lathes = [e for e in lathes if e.get("id") == lathe_id]
     if not lathes:
@@ -152,7 +167,7 @@ def load_scene(
             scene = mi.load_file(path, **defines)
         else:
             with open(path, encoding="utf-8") as f:
-                text = _override_film_size(f.read(), path, resolution)
+                text = set_film_size(f.read(), resolution, path)
             scene = load_string_in(os.path.dirname(os.path.abspath(path)), text, **defines)
     except SceneError:
         raise
