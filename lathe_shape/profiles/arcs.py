@@ -1,6 +1,6 @@
 """Glass-wall profiles built from circular arcs and lines (numpy only).
 
-This is the care the paper recommends for polyline profiles (method.md,
+This is the care the paper recommends for polyline profiles (docs/method.md,
 "Known limits of polylines (section 2.3, Figs. 5-6)"):
 
 * every circular arc is divided into **equal** parts (constant angle between
@@ -67,7 +67,7 @@ The spec (:func:`build_from_spec`, :func:`load_profile_spec`)::
       "bottom": "axis"              # or "flat", "none", [ ...elements... ]
     }
 
-The result is returned clockwise (the package's convention, method.md "The
+The result is returned clockwise (the package's convention, docs/method.md "The
 object") with the sharp flags, ready for :func:`lathe_shape.profiles.polyline.make_profile`.
 """
 
@@ -81,7 +81,7 @@ from typing import Any
 
 import numpy as np
 
-from .polyline import ProfileError
+from .errors import ProfileError
 
 __all__ = [
     "ArcPiece",
@@ -89,7 +89,6 @@ __all__ = [
     "ArcProfileBuilder",
     "build_from_spec",
     "load_profile_spec",
-    "profile_to_csv",
     "DEFAULT_STEP_DEG",
 ]
 
@@ -521,9 +520,9 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     profile spec and build it.
 
     Returns ``(points, sharp, labels)`` like
-    :func:`lathe_shape.profiles.polyline.read_profile_csv`; labels name the file and the
+    :func:`lathe_shape.profiles.sources.read_profile_csv`; labels name the file and the
     point (``"glass.json, point 12"``). Raises
-    :class:`~lathe_shape.profiles.polyline.ProfileError` with a message starting with
+    :class:`~lathe_shape.profiles.errors.ProfileError` with a message starting with
     the file path and naming the bad key.
     """
     path = os.fspath(path)
@@ -552,9 +551,3 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     labels = [f"{path}, point {k + 1}" for k in range(len(points))]
     return points, sharp, labels
 
-
-def profile_to_csv(points: np.ndarray, sharp: np.ndarray, header: str = "") -> str:
-    """CSV text (``r,z,sharp``) of a profile, for the polyline ``filename``."""
-    lines = [f"# {line}" for line in header.splitlines()] + ["r,z,sharp"]
-    lines += [f"{r:.9g},{z:.9g},{int(s)}" for (r, z), s in zip(points, sharp, strict=True)]
-    return "\n".join(lines) + "\n"
