@@ -8,7 +8,7 @@
 * :mod:`.arcs` -- profiles from lines and equally divided arcs (section 2.3).
 """
 
-from .arcs import build_from_spec, load_profile_spec
+from .arcs import build_from_spec, load_profile_spec, spec_with_step
 from .bspline import BSplineError, BSplineProfile, make_bspline_profile
 from .errors import ProfileError
 from .polyline import Profile, make_profile
@@ -33,5 +33,6 @@ __all__ = [
     "parse_profile_string",
     "read_points",
     "read_profile_csv",
+    "spec_with_step",
     "write_profile_csv",
 ]

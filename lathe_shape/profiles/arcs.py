@@ -73,6 +73,7 @@ object") with the sharp flags, ready for :func:`lathe_shape.profiles.polyline.ma
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -89,6 +90,8 @@ __all__ = [
     "ArcProfileBuilder",
     "build_from_spec",
     "load_profile_spec",
+    "read_profile_spec",
+    "spec_with_step",
     "DEFAULT_STEP_DEG",
 ]
 
@@ -511,6 +514,23 @@ def _add_bottom(b: ArcProfileBuilder, bottom: Any, first_wall: Piece) -> None:
     b.line(to=(0.0, float(p[1])), where="bottom")
 
 
+def spec_with_step(spec: dict, step_deg: float) -> dict:
+    """The same lines and arcs with every arc divided at ``step_deg``: the
+    elements' own ``segments`` and ``max_step_deg`` are dropped, a round rim
+    is divided at ``4 step_deg`` (a near-exact reference for small steps, or
+    a coarser polyline of the same object)."""
+    out = copy.deepcopy(spec)
+    out["max_step_deg"] = step_deg
+    for key in ("base", "wall"):
+        for element in out.get(key, []):
+            for body in element.values():
+                body.pop("segments", None)
+                body.pop("max_step_deg", None)
+    if isinstance(out.get("rim"), dict) and out["rim"].get("type") == "round":
+        out["rim"] = {"type": "round", "max_step_deg": 4 * step_deg}
+    return out
+
+
 # ---------------------------------------------------------------------------
 # Files
 # ---------------------------------------------------------------------------
@@ -526,28 +546,31 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     the file path and naming the bad key.
     """
     path = os.fspath(path)
+    points, sharp = build_from_spec(read_profile_spec(path), source=path)
+    labels = [f"{path}, point {k + 1}" for k in range(len(points))]
+    return points, sharp, labels
+
+
+def read_profile_spec(path: str | os.PathLike) -> Any:
+    """The spec in a JSON (``.json``) or TOML (``.toml``) file, unchecked
+    (:func:`build_from_spec` checks it)."""
+    path = os.fspath(path)
     try:
         with open(path, "rb") as f:
             data = f.read()
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile spec ({e.strerror})") from None
-    lower = path.lower()
-    if lower.endswith(".toml"):
+    if path.lower().endswith(".toml"):
         try:
             import tomllib
         except ImportError:  # Python < 3.11
             raise ProfileError(f"{path}: TOML profile specs need Python >= 3.11 (tomllib); "
                                f"use JSON instead") from None
         try:
-            spec = tomllib.loads(data.decode("utf-8"))
+            return tomllib.loads(data.decode("utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise ProfileError(f"{path}: not a valid TOML file ({e})") from None
-    else:
-        try:
-            spec = json.loads(data.decode("utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise ProfileError(f"{path}: not a valid JSON file ({e})") from None
-    points, sharp = build_from_spec(spec, source=path)
-    labels = [f"{path}, point {k + 1}" for k in range(len(points))]
-    return points, sharp, labels
-
+    try:
+        return json.loads(data.decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ProfileError(f"{path}: not a valid JSON file ({e})") from None
