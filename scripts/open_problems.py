@@ -42,15 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lathe_shape.cli.common import (
-    add_output_option,
-    add_render_options,
-    check_at_least,
-    output_folder,
-    parse_defines,
-    parse_resolution,
-    run_command,
-)
+from lathe_shape.cli import common as cli
 
 PROG = "open_problems.py"
 
@@ -121,21 +113,17 @@ def study_arcs(paper, render: Render, figure: str, name: str, steps: list[float]
 
 
 def study(args: argparse.Namespace) -> int:
-    import mitsuba as mi
-
-    mi.set_variant(args.variant)
-    import lathe_shape
-    from lathe_shape.tools.paper import load_paper, render_exact
+    from lathe_shape.tools.paper import load_paper, render_exact, render_size, select_variant
     from lathe_shape.tools.placement import error_report, plot_errors
 
-    lathe_shape.register()
-    check_at_least("--spp", args.spp, 1)
-    size = parse_resolution(args.resolution) if args.resolution else (32, 32) if args.quick else (128, 128)
+    select_variant(args.variant)
+    cli.check_at_least("--spp", args.spp, 1)
+    size = render_size(args.resolution, 32 if args.quick else 128)
     spp = args.spp or (2 if args.quick else 16)
     counts = [16, 31, 64] if args.quick else [16, 24, 31, 42, 64, 96, 128, 192]
     steps = [15.0, 7.5] if args.quick else [30.0, 20.0, 15.0, 10.0, 7.5, 5.0, 3.0, 2.0]
-    out = output_folder(args.output)
-    defines = parse_defines(args.defines)
+    out = cli.output_folder(args.output)
+    defines = cli.parse_defines(args.defines)
     paper = load_paper()
     start = time.perf_counter()
     print(f"{size[0]}x{size[1]}, {spp} spp, seed {args.seed} (exact references use the same seed and spp)")
@@ -161,14 +149,13 @@ def study(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    add_output_option(parser, default=os.path.join("out", "open_problems"),
-                      what="open_problems.txt and open_problems.png")
-    add_render_options(parser, seed_help="sampler seed of every render (default: 3)")
-    parser.set_defaults(seed=3)
-    parser.add_argument("--quick", action="store_true",
-                        help="32x32, 2 spp, few counts: a smoke run (default: 128x128, 16 spp)")
-    return run_command(PROG, parser, study, argv)
+    from lathe_shape.tools.paper import script_parser
+
+    parser = script_parser(PROG, __doc__, os.path.join("out", "open_problems"),
+                           "open_problems.txt and open_problems.png", seed=3,
+                           quick="32x32, 2 spp, fewer segment counts (a smoke run)",
+                           defaults="128x128, 16 spp")
+    return cli.run_command(PROG, parser, study, argv)
 
 
 if __name__ == "__main__":

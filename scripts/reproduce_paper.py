@@ -45,15 +45,7 @@ import os
 import sys
 import time
 
-from lathe_shape.cli.common import (
-    add_output_option,
-    add_render_options,
-    check_at_least,
-    output_folder,
-    parse_defines,
-    parse_resolution,
-    run_command,
-)
+from lathe_shape.cli import common as cli
 
 PROG = "reproduce_paper.py"
 
@@ -74,7 +66,7 @@ def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dic
     from lathe_shape.tools.images import write_exr, write_png
     from lathe_shape.tools.paper import render_exact
 
-    defines = parse_defines(args.defines)
+    defines = cli.parse_defines(args.defines)
     images, times, references = {}, {}, {}
     for name in paper.figures:
         image, seconds = render_exact(paper.scene(name), spp, args.seed, size, defines, warm=True)
@@ -110,22 +102,18 @@ def table_rows(paper, counts, images, times, references, ref_spp: int) -> list[s
 
 
 def reproduce(args: argparse.Namespace) -> int:
-    import mitsuba as mi
+    from lathe_shape.tools.paper import load_paper, render_size, segment_counts, select_variant, write_sheet
 
-    mi.set_variant(args.variant)
-    import lathe_shape
-    from lathe_shape.tools.paper import load_paper, segment_counts, write_sheet
-
-    lathe_shape.register()
+    select_variant(args.variant)
     paper = load_paper()
     if args.make:
         return make_profiles(paper)
-    check_at_least("--spp", args.spp, 1)
-    check_at_least("--ref-spp", args.ref_spp, 1)
-    size = parse_resolution(args.resolution) if args.resolution else (48, 48) if args.quick else (512, 512)
+    cli.check_at_least("--spp", args.spp, 1)
+    cli.check_at_least("--ref-spp", args.ref_spp, 1)
+    size = render_size(args.resolution, 48 if args.quick else 512)
     spp = args.spp or (4 if args.quick else 64)
     ref_spp = args.ref_spp or (16 if args.quick else 4 * spp)
-    out = output_folder(args.output)
+    out = cli.output_folder(args.output)
     counts = segment_counts(paper)
     start = time.perf_counter()
     print(f"{size[0]}x{size[1]}, {spp} spp (references {ref_spp} spp), lathe_path normal_check none, "
@@ -145,16 +133,14 @@ def reproduce(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    add_output_option(parser, default=os.path.join("out", "paper"), what="figures, references, table, sheet")
-    add_render_options(parser, seed_help="sampler seed (default: 7; references use seed + 1)")
-    parser.set_defaults(seed=7)
-    parser.add_argument("--quick", action="store_true",
-                        help="48x48, 4 spp, references 16 spp: a CI smoke run "
-                             "(the scenes' defaults: 512x512, 64 spp)")
+    from lathe_shape.tools.paper import script_parser
+
+    parser = script_parser(PROG, __doc__, os.path.join("out", "paper"), "figures, references, table, sheet",
+                           seed=7, quick="48x48, 4 spp, references 16 spp (a CI smoke run)",
+                           defaults="512x512, 64 spp (the scenes' defaults), references 4x the spp")
     parser.add_argument("--ref-spp", type=int, help="reference spp (default 4x --spp, quick 16)")
     parser.add_argument("--make", action="store_true", help="regenerate the derived profiles and exit")
-    return run_command(PROG, parser, reproduce, argv)
+    return cli.run_command(PROG, parser, reproduce, argv)
 
 
 if __name__ == "__main__":

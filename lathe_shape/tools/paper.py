@@ -35,7 +35,10 @@ __all__ = [
     "glass_control_points",
     "load_paper",
     "render_exact",
+    "render_size",
+    "script_parser",
     "segment_counts",
+    "select_variant",
     "write_derived_profiles",
     "write_sheet",
 ]
@@ -99,6 +102,44 @@ def load_paper(folder: str | os.PathLike = PAPER_SCENES) -> Paper:
     }
     return Paper(folder, figures, references, table["derived_profiles"], table["sheet"],
                  table["open_problems"])
+
+
+def select_variant(variant: str) -> None:
+    """What the paper scripts do first: select the Mitsuba ``variant`` and
+    register the plugins."""
+    import mitsuba as mi
+
+    if variant not in mi.variants():
+        raise ValueError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
+    mi.set_variant(variant)
+    import lathe_shape
+
+    lathe_shape.register()
+
+
+def script_parser(prog: str, doc: str, output: str, what: str, seed: int, quick: str, defaults: str):
+    """The options of the paper scripts (the cli.common convention): ``-o``,
+    ``--spp``, ``--resolution``, ``--seed`` (default ``seed``),
+    ``--variant``, ``-D`` and ``--quick`` (a smoke run, ``quick`` says
+    what); ``defaults`` names the resolution and spp used without options."""
+    import argparse
+
+    from ..cli.common import add_output_option, add_render_options
+
+    epilog = f"Without --resolution and --spp: {defaults}; with --quick: {quick}."
+    parser = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0], epilog=epilog)
+    add_output_option(parser, default=output, what=what)
+    add_render_options(parser, seed_help=f"sampler seed (default: {seed})")
+    parser.set_defaults(seed=seed)
+    parser.add_argument("--quick", action="store_true", help=quick)
+    return parser
+
+
+def render_size(resolution: str | None, side: int) -> tuple[int, int]:
+    """``--resolution WxH`` when given, else a ``side`` x ``side`` square."""
+    from ..cli.common import parse_resolution
+
+    return parse_resolution(resolution) if resolution else (side, side)
 
 
 def glass_control_points(paper: Paper) -> np.ndarray:
