@@ -91,7 +91,7 @@ def study_arcs(paper, render: Render, figure: str, name: str, steps: list[float]
     from lathe_shape.tools.paper import arc_spec
 
     spec = arc_spec(paper, figure)
-    exact = render(figure, paper.references[name].profile)
+    exact = render(figure, paper.references[name].profile_file)
     dense, dense_sharp, _ = pl.dense_arcs(spec)
     s, th = pl.turning(dense)
     must = np.flatnonzero(dense_sharp)
@@ -128,8 +128,8 @@ def study(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     print(f"{size[0]}x{size[1]}, {spp} spp, seed {args.seed} (exact references use the same seed and spp)")
 
-    def render(figure: str, profile: str | None) -> np.ndarray:
-        return render_exact(paper.scene(figure), spp, args.seed, size, defines, profile=profile)[0]
+    def render(figure: str, profile_file: str | None) -> np.ndarray:
+        return render_exact(paper.scene(figure), spp, args.seed, size, defines, profile_file=profile_file)[0]
 
     with tempfile.TemporaryDirectory(prefix="open_problems_") as folder:
         tmp = Path(folder)

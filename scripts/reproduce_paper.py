@@ -77,7 +77,7 @@ def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dic
     for name in sorted(paper.references):
         ref = paper.references[name]
         image, _ = render_exact(paper.scene(ref.figure), ref_spp, args.seed + 1, size, defines,
-                                profile=ref.profile)
+                                profile_file=ref.profile_file)
         references[name] = image
         write_exr(os.path.join(out, f"reference_{name}.exr"), image, {"spp": ref_spp})
         write_png(os.path.join(out, f"reference_{name}.png"), image)

@@ -50,13 +50,12 @@ PAPER_SCENES = Path(__file__).resolve().parents[2] / "scenes" / "paper"
 @dataclass(frozen=True)
 class Figure:
     """One of the paper's figures: its scene ``<name>.xml`` in the paper
-    folder renders ``profile`` with ``method`` (``segments`` of them)."""
+    folder renders ``profile_file`` with ``method`` (``segments`` of them)."""
 
     name: str
     title: str
     method: str
-    template: str
-    profile: str
+    profile_file: str
     segments: int
     paper_time: str
     reference: str
@@ -65,11 +64,11 @@ class Figure:
 @dataclass(frozen=True)
 class Reference:
     """The exact object of a figure: the scene of ``figure`` with the
-    profile file ``profile`` (None: the scene's own), described by ``text``."""
+    profile file ``profile_file`` (None: the scene's own), described by ``text``."""
 
     name: str
     figure: str
-    profile: str | None
+    profile_file: str | None
     text: str
 
 
@@ -97,7 +96,8 @@ def load_paper(folder: str | os.PathLike = PAPER_SCENES) -> Paper:
     table = json.loads((folder / "figures.json").read_text(encoding="utf-8"))
     figures = {name: Figure(name=name, **entry) for name, entry in table["figures"].items()}
     references = {
-        name: Reference(name=name, figure=entry["figure"], profile=entry.get("profile"), text=entry["text"])
+        name: Reference(name=name, figure=entry["figure"], profile_file=entry.get("profile_file"),
+                        text=entry["text"])
         for name, entry in table["references"].items()
     }
     return Paper(folder, figures, references, table["derived_profiles"], table["sheet"],
@@ -144,12 +144,12 @@ def render_size(resolution: str | None, side: int) -> tuple[int, int]:
 
 def glass_control_points(paper: Paper) -> np.ndarray:
     """Fig. 8b: the open uniform cubic B-spline control points of the glass."""
-    return read_points(paper.folder / paper.figures["fig8b"].profile)[0]
+    return read_points(paper.folder / paper.figures["fig8b"].profile_file)[0]
 
 
 def arc_spec(paper: Paper, figure: str) -> dict:
     """The arc spec (a dict) of an arc-built figure."""
-    return read_profile_spec(paper.folder / paper.figures[figure].profile)
+    return read_profile_spec(paper.folder / paper.figures[figure].profile_file)
 
 
 def write_derived_profiles(paper: Paper) -> list[str]:
@@ -195,14 +195,14 @@ def _declared_default(path: Path, name: str) -> str | None:
     return None if node is None else node.get("value")
 
 
-def _load(path: Path, defines: dict[str, str], resolution: tuple[int, int] | None, profile: str | None):
-    """The scene, its lathe reading ``profile`` (a polyline file; relative to
+def _load(path: Path, defines: dict[str, str], resolution: tuple[int, int] | None, profile_file: str | None):
+    """The scene, its lathe reading ``profile_file`` (a polyline file; relative to
     the scene's folder) when given."""
     from .scenes import load_scene, replace_profile
 
-    if profile is None:
+    if profile_file is None:
         return load_scene(path, defines, resolution)
-    profile_path = Path(profile) if Path(profile).is_absolute() else path.parent / profile
+    profile_path = path.parent / profile_file  # an absolute profile_file stays absolute
     text = replace_profile(path.read_text(encoding="utf-8"), filename=str(profile_path.resolve()),
                            kind="polyline", source=str(path))
     with tempfile.TemporaryDirectory(prefix="lathe_paper_") as folder:
@@ -217,18 +217,18 @@ def render_exact(
     seed: int,
     resolution: tuple[int, int] | None = None,
     defines: dict[str, str] | None = None,
-    profile: str | None = None,
+    profile_file: str | os.PathLike | None = None,
     warm: bool = False,
 ) -> tuple[np.ndarray, float]:
     """Render a paper scene exactly (``lathe_path``, ``normal_check none``,
-    the scene's ``max_depth``); returns (image, seconds). ``profile`` swaps
+    the scene's ``max_depth``); returns (image, seconds). ``profile_file`` swaps
     the lathe's profile file; ``warm`` renders once first so that the time
     excludes JIT compilation."""
     import mitsuba as mi
 
     path = Path(path)
     defines = {"spp": str(spp), **(defines or {})}
-    scene = _load(path, defines, resolution, profile)
+    scene = _load(path, defines, resolution, profile_file)
     max_depth = int(defines.get("max_depth", _declared_default(path, "max_depth") or -1))
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "normal_check": "none"})
     if warm:
