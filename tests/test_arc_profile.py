@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from lathe_shape.profiles.arcs import ArcPiece, build_from_spec, load_profile_spec
-from lathe_shape.profiles.polyline import ProfileError, make_profile
+from lathe_shape.profiles import ProfileError, build_from_spec, load_profile_spec, make_profile, read_points
+from lathe_shape.profiles.arcs import ArcPiece
 
 #: A goblet: foot, stem, fillet, spherical bowl (centre on the axis), upper arc.
 SPEC = {
@@ -173,3 +173,15 @@ def test_paper_specs_load_in_scene():
         scene = mi.load_file(str(ROOT / "scenes" / "paper" / f"{fig}.xml"), res="8", spp="1")
         lathe = [s for s in scene.shapes() if hasattr(s, "profile")][0]
         assert lathe.profile.segment_count == n, fig
+
+
+@pytest.mark.parametrize("name", ["wine_glass", "sundae_cup", "brandy_bottle"])
+def test_scene_specs_build_the_scene_profiles(name):
+    """scenes/NAME.csv is scenes/NAME.json built by the library (written with
+    6 decimals by scripts/make_profiles.py)."""
+    from tests.conftest import ROOT
+
+    built, built_sharp, _ = read_points(ROOT / "scenes" / f"{name}.json")
+    stored, stored_sharp, _ = read_points(ROOT / "scenes" / f"{name}.csv")
+    assert built.shape == stored.shape and np.array_equal(built_sharp, stored_sharp)
+    assert np.abs(built - stored).max() <= 5e-7 + 1e-12

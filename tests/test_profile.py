@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import random_ring_profile, random_vase_profile
 
-from lathe_shape.profiles.polyline import ProfileError, make_profile, parse_profile_string, read_profile_csv
+from lathe_shape.profiles import ProfileError, make_profile, parse_profile_string, read_profile_csv
 
 GLASS = "0 0, 1 0, 1 2, 0.9 2, 0.9 0.1, 0 0.1"
 

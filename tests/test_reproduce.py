@@ -6,15 +6,16 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
+from conftest import ROOT, VARIANT
 from PIL import Image
-
-from tests.conftest import ROOT
 
 
 def test_reproduce_paper_quick(tmp_path):
     out = tmp_path / "paper"
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "reproduce_paper.py"), "--quick", "--out", str(out)],
+        [sys.executable, str(ROOT / "scripts" / "reproduce_paper.py"), "--quick", "-o", str(out),
+         "--variant", VARIANT],
         capture_output=True, text=True, timeout=300, cwd=str(ROOT))
     assert proc.returncode == 0, proc.stderr[-3000:]
     text = proc.stdout
@@ -30,6 +31,13 @@ def test_reproduce_paper_quick(tmp_path):
     assert sheet.size[0] >= 3 * 48
     for name in ("glass", "glass_fig9", "sundae_cup", "brandy_bottle"):
         assert (out / f"reference_{name}.exr").is_file()
+
+
+@pytest.mark.parametrize("script", ["reproduce_paper.py", "open_problems.py", "make_profiles.py"])
+def test_script_help(script):
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / script), "--help"],
+                          capture_output=True, text=True, timeout=120, cwd=str(ROOT))
+    assert proc.returncode == 0 and "-o DIR, --output DIR" in proc.stdout, proc.stderr[-2000:]
 
 
 def test_lathe_compare(tmp_path):

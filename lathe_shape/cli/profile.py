@@ -3,14 +3,18 @@ polyline profile of N points.
 
 Examples::
 
-    lathe-profile scenes/wine_glass.csv                          # validate + summary
-    lathe-profile glass_spline.csv --kind bspline --to-polyline 32 --method adaptive -o glass_32.csv
+    lathe-profile scenes/wine_glass.csv                                  # validate + summary
+    lathe-profile glass.csv --kind bspline --to-polyline 32              # CSV on stdout
+    lathe-profile glass.csv --kind bspline --to-polyline 32 -o out       # writes out/glass_32.csv
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+
+from .common import CliError, run_command
 
 __all__ = ["main", "build_parser"]
 
@@ -30,65 +34,78 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--method", choices=("uniform", "adaptive"), default="adaptive",
                         help="point placement for --to-polyline: uniform in t, or curvature-adaptive "
                              "(nearly constant turning angle, the paper's advice; default)")
-    parser.add_argument("-o", "--output", help="output CSV for --to-polyline (default: stdout)")
+    parser.add_argument("-o", "--output", metavar="DIR",
+                        help="output folder, created if missing: --to-polyline writes "
+                             "DIR/<input stem>_<N>.csv (default: the CSV goes to stdout)")
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def describe_polyline(path: str, points, sharp, labels, crease_angle: float) -> str:
+    """Validate polyline points; the one-line summary."""
     import numpy as np
 
-    from ..profiles import bspline as bs
-    from ..profiles.bspline import make_bspline_profile
-    from ..profiles.polyline import make_profile, read_profile_csv
+    from ..profiles import make_profile
 
-    def fail(message: str) -> int:
-        print(f"lathe-profile: error: {message}", file=sys.stderr)
-        return 2
+    polyline = make_profile(points, sharp, labels, source=path, crease_angle=crease_angle)
+    r_max, z_min, z_max = polyline.bounds()
+    form = "closed loop" if polyline.closed_loop else "both ends on the axis"
+    creases = int(np.sum(np.any(polyline.normal_end[:-1] != polyline.normal_start[1:], axis=1)))
+    return (f"{path}: valid polyline profile, {len(polyline.points)} points, "
+            f"{polyline.segment_count} surface segments, {form}, r <= {r_max:g}, "
+            f"z in [{z_min:g}, {z_max:g}], {creases} creases at {crease_angle:g} deg")
 
-    try:
-        if args.input.lower().endswith((".json", ".toml")):
-            from ..profiles.arcs import load_profile_spec
 
-            points, sharp, labels = load_profile_spec(args.input)
-        else:
-            points, sharp, labels = read_profile_csv(args.input)
-        if args.kind == "polyline":
-            if args.to_polyline is not None:
-                return fail("--to-polyline needs --kind bspline (the input is already a polyline)")
-            prof = make_profile(points, sharp, labels, source=args.input, crease_angle=args.crease_angle)
-            r_max, z_min, z_max = prof.bounds()
-            form = "closed loop" if prof.closed_loop else "both ends on the axis"
-            creases = int(np.sum(np.any(prof.normal_end[:-1] != prof.normal_start[1:], axis=1)))
-            print(f"{args.input}: valid polyline profile, {len(prof.points)} points, "
-                  f"{prof.segment_count} surface segments, {form}, r <= {r_max:g}, "
-                  f"z in [{z_min:g}, {z_max:g}], {creases} creases at {args.crease_angle:g} deg")
-            return 0
-        spline = make_bspline_profile(points, args.input)
-        if args.to_polyline is None:
-            r_max, z_min, z_max = spline.bounds()
-            form = "closed periodic" if spline.closed_loop else "open, ends on the axis"
-            print(f"{args.input}: valid cubic B-spline profile, {len(spline.points)} control points, "
-                  f"{spline.segment_count} curve segments, {form}, r <= {r_max:g}, "
-                  f"z in [{z_min:g}, {z_max:g}]")
-            return 0
-        if args.to_polyline < 3:
-            return fail(f"--to-polyline needs at least 3 points, got {args.to_polyline}")
-        poly = bs.to_polyline(spline.segment_controls, args.to_polyline, args.method)
-        # The result must itself be a valid polyline profile.
-        make_profile(poly, source=f"polyline of {args.input}")
-    except (OSError, ValueError) as e:
-        return fail(str(e))
-    lines = [f"# {len(poly)} points: {args.method} polyline of the B-spline {args.input}", "r,z"]
-    lines += [f"{r:.9g},{z:.9g}" for r, z in poly]
-    text = "\n".join(lines) + "\n"
-    if args.output:
-        with open(args.output, "w", encoding="utf-8") as f:
-            f.write(text)
-        print(f"wrote {args.output} ({len(poly)} points)", file=sys.stderr)
-    else:
+def describe_bspline(path: str, spline) -> str:
+    """The one-line summary of a validated B-spline profile."""
+    r_max, z_min, z_max = spline.bounds()
+    form = "closed periodic" if spline.closed_loop else "open, ends on the axis"
+    return (f"{path}: valid cubic B-spline profile, {len(spline.points)} control points, "
+            f"{spline.segment_count} curve segments, {form}, r <= {r_max:g}, "
+            f"z in [{z_min:g}, {z_max:g}]")
+
+
+def convert(args: argparse.Namespace, spline) -> int:
+    """``--to-polyline N``: the polyline CSV, to stdout or DIR/<stem>_<N>.csv."""
+    from ..profiles import format_profile_csv, make_profile
+    from ..profiles.bspline import to_polyline
+    from .common import output_folder
+
+    if args.to_polyline < 3:
+        raise CliError(f"--to-polyline needs at least 3 points, got {args.to_polyline}")
+    polyline = to_polyline(spline.segment_controls, args.to_polyline, args.method)
+    # The result must itself be a valid polyline profile.
+    make_profile(polyline, source=f"polyline of {args.input}")
+    text = format_profile_csv(
+        polyline, header=f"{len(polyline)} points: {args.method} polyline of the B-spline {args.input}")
+    if args.output is None:
         sys.stdout.write(text)
+        return 0
+    stem = os.path.splitext(os.path.basename(args.input))[0]
+    path = os.path.join(output_folder(args.output), f"{stem}_{args.to_polyline}.csv")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)
+    print(f"wrote {path} ({len(polyline)} points)", file=sys.stderr)
     return 0
+
+
+def check_profile(args: argparse.Namespace) -> int:
+    from ..profiles import make_bspline_profile, read_points
+
+    points, sharp, labels = read_points(args.input)
+    if args.kind == "polyline":
+        if args.to_polyline is not None:
+            raise CliError("--to-polyline needs --kind bspline (the input is already a polyline)")
+        print(describe_polyline(args.input, points, sharp, labels, args.crease_angle))
+        return 0
+    spline = make_bspline_profile(points, args.input)
+    if args.to_polyline is None:
+        print(describe_bspline(args.input, spline))
+        return 0
+    return convert(args, spline)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_command("lathe-profile", build_parser(), check_profile, argv)
 
 
 if __name__ == "__main__":

@@ -1,2 +1,38 @@
 """Profiles of solids of revolution: polylines, cubic B-splines and arc specs
-(numpy only, no Mitsuba)."""
+(numpy only, no Mitsuba).
+
+* :mod:`.sources` -- the raw points of a profile (inline string, CSV file,
+  arc spec) and the CSV writer;
+* :mod:`.polyline` -- the validated polyline :class:`Profile` (Method 1);
+* :mod:`.bspline` -- the validated :class:`BSplineProfile` (Method 2);
+* :mod:`.arcs` -- profiles from lines and equally divided arcs (section 2.3).
+"""
+
+from .arcs import build_from_spec, load_profile_spec, spec_with_step
+from .bspline import BSplineError, BSplineProfile, make_bspline_profile
+from .errors import ProfileError
+from .polyline import Profile, make_profile
+from .sources import (
+    format_profile_csv,
+    parse_profile_string,
+    read_points,
+    read_profile_csv,
+    write_profile_csv,
+)
+
+__all__ = [
+    "BSplineError",
+    "BSplineProfile",
+    "Profile",
+    "ProfileError",
+    "build_from_spec",
+    "format_profile_csv",
+    "load_profile_spec",
+    "make_bspline_profile",
+    "make_profile",
+    "parse_profile_string",
+    "read_points",
+    "read_profile_csv",
+    "spec_with_step",
+    "write_profile_csv",
+]

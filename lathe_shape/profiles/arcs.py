@@ -1,6 +1,6 @@
 """Glass-wall profiles built from circular arcs and lines (numpy only).
 
-This is the care the paper recommends for polyline profiles (method.md,
+This is the care the paper recommends for polyline profiles (docs/method.md,
 "Known limits of polylines (section 2.3, Figs. 5-6)"):
 
 * every circular arc is divided into **equal** parts (constant angle between
@@ -67,12 +67,13 @@ The spec (:func:`build_from_spec`, :func:`load_profile_spec`)::
       "bottom": "axis"              # or "flat", "none", [ ...elements... ]
     }
 
-The result is returned clockwise (the package's convention, method.md "The
+The result is returned clockwise (the package's convention, docs/method.md "The
 object") with the sharp flags, ready for :func:`lathe_shape.profiles.polyline.make_profile`.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -81,7 +82,7 @@ from typing import Any
 
 import numpy as np
 
-from .polyline import ProfileError
+from .errors import ProfileError
 
 __all__ = [
     "ArcPiece",
@@ -89,7 +90,8 @@ __all__ = [
     "ArcProfileBuilder",
     "build_from_spec",
     "load_profile_spec",
-    "profile_to_csv",
+    "read_profile_spec",
+    "spec_with_step",
     "DEFAULT_STEP_DEG",
 ]
 
@@ -512,6 +514,23 @@ def _add_bottom(b: ArcProfileBuilder, bottom: Any, first_wall: Piece) -> None:
     b.line(to=(0.0, float(p[1])), where="bottom")
 
 
+def spec_with_step(spec: dict, step_deg: float) -> dict:
+    """The same lines and arcs with every arc divided at ``step_deg``: the
+    elements' own ``segments`` and ``max_step_deg`` are dropped, a round rim
+    is divided at ``4 step_deg`` (a near-exact reference for small steps, or
+    a coarser polyline of the same object)."""
+    out = copy.deepcopy(spec)
+    out["max_step_deg"] = step_deg
+    for key in ("base", "wall"):
+        for element in out.get(key, []):
+            for body in element.values():
+                body.pop("segments", None)
+                body.pop("max_step_deg", None)
+    if isinstance(out.get("rim"), dict) and out["rim"].get("type") == "round":
+        out["rim"] = {"type": "round", "max_step_deg": 4 * step_deg}
+    return out
+
+
 # ---------------------------------------------------------------------------
 # Files
 # ---------------------------------------------------------------------------
@@ -521,40 +540,37 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     profile spec and build it.
 
     Returns ``(points, sharp, labels)`` like
-    :func:`lathe_shape.profiles.polyline.read_profile_csv`; labels name the file and the
+    :func:`lathe_shape.profiles.sources.read_profile_csv`; labels name the file and the
     point (``"glass.json, point 12"``). Raises
-    :class:`~lathe_shape.profiles.polyline.ProfileError` with a message starting with
+    :class:`~lathe_shape.profiles.errors.ProfileError` with a message starting with
     the file path and naming the bad key.
     """
+    path = os.fspath(path)
+    points, sharp = build_from_spec(read_profile_spec(path), source=path)
+    labels = [f"{path}, point {k + 1}" for k in range(len(points))]
+    return points, sharp, labels
+
+
+def read_profile_spec(path: str | os.PathLike) -> Any:
+    """The spec in a JSON (``.json``) or TOML (``.toml``) file, unchecked
+    (:func:`build_from_spec` checks it)."""
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:
             data = f.read()
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile spec ({e.strerror})") from None
-    lower = path.lower()
-    if lower.endswith(".toml"):
+    if path.lower().endswith(".toml"):
         try:
             import tomllib
         except ImportError:  # Python < 3.11
             raise ProfileError(f"{path}: TOML profile specs need Python >= 3.11 (tomllib); "
                                f"use JSON instead") from None
         try:
-            spec = tomllib.loads(data.decode("utf-8"))
+            return tomllib.loads(data.decode("utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
             raise ProfileError(f"{path}: not a valid TOML file ({e})") from None
-    else:
-        try:
-            spec = json.loads(data.decode("utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise ProfileError(f"{path}: not a valid JSON file ({e})") from None
-    points, sharp = build_from_spec(spec, source=path)
-    labels = [f"{path}, point {k + 1}" for k in range(len(points))]
-    return points, sharp, labels
-
-
-def profile_to_csv(points: np.ndarray, sharp: np.ndarray, header: str = "") -> str:
-    """CSV text (``r,z,sharp``) of a profile, for the polyline ``filename``."""
-    lines = [f"# {line}" for line in header.splitlines()] + ["r,z,sharp"]
-    lines += [f"{r:.9g},{z:.9g},{int(s)}" for (r, z), s in zip(points, sharp, strict=True)]
-    return "\n".join(lines) + "\n"
+    try:
+        return json.loads(data.decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ProfileError(f"{path}: not a valid JSON file ({e})") from None

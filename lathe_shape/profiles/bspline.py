@@ -1,9 +1,9 @@
-"""Uniform cubic B-spline profiles (method.md, Method 2), numpy only.
+"""Uniform cubic B-spline profiles (docs/method.md, Method 2), numpy only.
 
 A profile lives in the (r, z) half plane: ``r >= 0`` is the distance from the
 lathe's local +z axis, ``z`` the position along it. The curve is a uniform
 cubic B-spline of the control points ``P_0 .. P_(m-1)``; segment ``i`` uses
-``P_i .. P_(i+3)`` and, for ``t`` in [0, 1], is (method.md eqs. 13-14)
+``P_i .. P_(i+3)`` and, for ``t`` in [0, 1], is (docs/method.md eqs. 13-14)
 
     B_i(t) = ((1-t)^3 P_i + (3t^3 - 6t^2 + 4) P_(i+1)
               + (-3t^3 + 3t^2 + 3t + 1) P_(i+2) + t^3 P_(i+3)) / 6.
@@ -21,7 +21,7 @@ Two forms, chosen by the points themselves:
 ``bspline_segments`` returns the per-segment control points (after closing or
 tripling), which is what every other function here (and the Dr.Jit kernel in
 :mod:`lathe_shape.kernels.bspline`) takes. Orientation: like polyline
-profiles (method.md, "The object"), the kernels expect the curve to run
+profiles (docs/method.md, "The object"), the kernels expect the curve to run
 clockwise in the (r right, z up) plane, interior on the right; use
 :func:`orient_clockwise` on the control points first.
 """
@@ -106,6 +106,16 @@ def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
         raise BSplineError(f"{source}: B-spline control point {bad} is not finite: "
                            f"{p[bad].tolist()}")
 
+    seg, closed = _segment_controls(p, source)
+    _validate_curve(seg, closed, source)
+    return seg
+
+
+def _segment_controls(p: np.ndarray, source: str) -> tuple[np.ndarray, bool]:
+    """Per-segment control points (closing or tripling the ends) of finite
+    (m, 2) control points, and whether the form is closed; checks the point
+    count and, for the open form, that the ends lie on the axis. No
+    geometric validation (:func:`_validate_curve` does that)."""
     closed = is_closed(p)
     if closed:
         q = p[:-1]
@@ -131,9 +141,7 @@ def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
         q = np.concatenate([p[:1], p[:1], p, p[-1:], p[-1:]])
         idx = np.arange(len(q) - 3)[:, None] + np.arange(4)[None, :]
         seg = q[idx]
-
-    _validate_curve(seg, closed, source)
-    return seg
+    return seg, closed
 
 
 def _scale(p: np.ndarray) -> float:
@@ -320,9 +328,19 @@ def orient_clockwise(points: np.ndarray, source: str = "profile") -> np.ndarray:
     Reversing the control points of a uniform B-spline reverses the curve
     (the basis is symmetric under ``t -> 1 - t``), for both forms.
     """
+    return _validated_clockwise(points, source)[0]
+
+
+def _validated_clockwise(points: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate the curve once (:func:`bspline_segments`) and orient it
+    clockwise: (control points, per-segment control points). The reversed
+    curve is the same curve, so it is rebuilt without validating again."""
     p = np.array(points, dtype=np.float64)
     seg = bspline_segments(p, source)
-    return p if orientation_sign(seg) > 0 else p[::-1].copy()
+    if orientation_sign(seg) > 0:
+        return p, seg
+    p = p[::-1].copy()
+    return p, _segment_controls(p, source)[0]
 
 
 # ---------------------------------------------------------------------------
@@ -354,10 +372,9 @@ class BSplineProfile:
 def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
     """Validate B-spline control points (see the module docstring) and
     orient them clockwise."""
-    points = orient_clockwise(np.asarray(points, dtype=np.float64), source)
-    closed = is_closed(points)
-    controls = bspline_segments(points, source)
-    return BSplineProfile(points=points, segment_controls=controls, closed_loop=closed, source=source)
+    points, controls = _validated_clockwise(points, source)
+    return BSplineProfile(points=points, segment_controls=controls, closed_loop=is_closed(points),
+                          source=source)
 
 
 # ---------------------------------------------------------------------------
@@ -435,7 +452,7 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
     Parameter ``method``:
         ``"uniform"``: uniform in the global parameter ``T = seg + t``.
         ``"adaptive"``: points placed at equal steps of the turning angle
-        (method.md section 2.3: keep the angle between successive segments
+        (docs/method.md section 2.3: keep the angle between successive segments
         small and nearly constant), blended with 10% arc length so straight
         stretches still get points.
 

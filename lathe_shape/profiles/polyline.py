@@ -4,7 +4,7 @@ A profile is a closed 2D curve in the (r, z) half plane of the shape's local
 frame: ``r >= 0`` is the distance from the axis (local +z), ``z`` the position
 along it. Revolving it about the axis gives the solid.
 
-Conventions (see ``shared/docs/method.md``):
+Conventions (see docs/method.md, "The object"):
 
 * **Closed.** A profile is closed when its last point equals its first, or
   when both its first and its last point lie on the axis (``r = 0``); the
@@ -22,19 +22,20 @@ Conventions (see ``shared/docs/method.md``):
   fig. 3) unless the corner turns by more than ``crease_angle`` degrees or the
   vertex is flagged sharp; then each segment keeps its own normal there.
 
-Sources: an inline string ``"r z, r z, ..."`` (the ``profile`` parameter) or a
-CSV file (the ``filename`` parameter) with columns ``r,z`` and an optional
-third column ``sharp`` (1 = crease at this vertex); ``#`` starts a comment and
-an optional header line names the columns.
+The raw points come from :mod:`lathe_shape.profiles.sources` (inline
+string, CSV file or arc spec); :func:`parse_profile_string` and
+:func:`read_profile_csv` are re-exported here for existing callers.
 """
 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
+
+from .errors import ProfileError
+from .sources import parse_profile_string, read_profile_csv
 
 __all__ = [
     "ProfileError",
@@ -43,10 +44,6 @@ __all__ = [
     "read_profile_csv",
     "make_profile",
 ]
-
-
-class ProfileError(ValueError):
-    """Invalid profile input. The message names the source and the problem."""
 
 
 @dataclass(frozen=True)
@@ -93,93 +90,6 @@ class Profile:
 
 
 # ---------------------------------------------------------------------------
-# Parsing
-# ---------------------------------------------------------------------------
-
-
-def parse_profile_string(
-    text: str, source: str = "parameter 'profile'"
-) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Parse ``"r z, r z, ..."`` (or ``"r z sharp, ..."``) into points.
-
-    Returns ``(points (n, 2), sharp (n,), labels)``; ``labels[k]`` names point
-    ``k`` in error messages.
-    """
-    items = [item.strip() for item in text.replace(";", ",").split(",")]
-    items = [item for item in items if item]
-    rows: list[list[float]] = []
-    sharp: list[bool] = []
-    labels: list[str] = []
-    for k, item in enumerate(items):
-        label = f"{source}, point {k + 1}"
-        point, flag = _parse_row(item.split(), label, f"expected 'r z' or 'r z sharp', got {item!r}")
-        rows.append(point)
-        sharp.append(flag)
-        labels.append(label)
-    return _as_points(rows), np.array(sharp, dtype=bool), labels
-
-
-def read_profile_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Read a profile CSV file: columns ``r,z[,sharp]``, ``#`` comments,
-    optional header. Returns ``(points, sharp, labels)`` like
-    :func:`parse_profile_string`; labels give file name and line number."""
-    path = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            lines = f.readlines()
-    except OSError as e:
-        raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
-    rows: list[list[float]] = []
-    sharp: list[bool] = []
-    labels: list[str] = []
-    for number, line in enumerate(lines, start=1):
-        content = line.split("#", 1)[0].strip()
-        if not content:
-            continue
-        fields = [f.strip() for f in content.replace(";", ",").split(",")]
-        if len(fields) == 1:
-            fields = content.split()
-        label = f"{path}, line {number}"
-        if not rows and not labels and _is_header(fields):
-            continue
-        point, flag = _parse_row(fields, label, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
-        rows.append(point)
-        sharp.append(flag)
-        labels.append(label)
-    return _as_points(rows), np.array(sharp, dtype=bool), labels
-
-
-def _parse_row(fields: list[str], label: str, wrong_count: str) -> tuple[list[float], bool]:
-    """One point: ``r z`` or ``r z sharp`` -> ([r, z], sharp)."""
-    if len(fields) not in (2, 3):
-        raise ProfileError(f"{label}: {wrong_count}")
-    point = [_parse_float(f, label) for f in fields[:2]]
-    return point, len(fields) == 3 and _parse_flag(fields[2], label)
-
-
-def _is_header(fields: list[str]) -> bool:
-    names = [f.lower() for f in fields]
-    return names[:2] == ["r", "z"] and (len(names) == 2 or names[2:] == ["sharp"])
-
-
-def _parse_float(text: str, label: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise ProfileError(f"{label}: {text!r} is not a number") from None
-
-
-def _parse_flag(text: str, label: str) -> bool:
-    if text in ("0", "1"):
-        return text == "1"
-    raise ProfileError(f"{label}: sharp flag must be 0 or 1, got {text!r}")
-
-
-def _as_points(rows: list[list[float]]) -> np.ndarray:
-    return np.array(rows, dtype=np.float64).reshape(-1, 2)
-
-
-# ---------------------------------------------------------------------------
 # Validation and canonical form
 # ---------------------------------------------------------------------------
 
@@ -199,72 +109,23 @@ def make_profile(
     area, and a self-intersecting profile.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    n_in = len(pts)
-    flags = np.zeros(n_in, dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
+    flags = np.zeros(len(pts), dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
     if labels is None:
-        labels = [f"{source}, point {k + 1}" for k in range(n_in)]
+        labels = [f"{source}, point {k + 1}" for k in range(len(pts))]
     if not math.isfinite(crease_angle) or not 0.0 <= crease_angle <= 180.0:
         raise ProfileError(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
         )
-
-    bad = ~np.isfinite(pts).all(axis=1)
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ProfileError(f"{labels[k]}: non-finite coordinate ({_fmt(pts[k])})")
-    negative = pts[:, 0] < 0.0
-    if negative.any():
-        k = int(np.argmax(negative))
-        raise ProfileError(f"{labels[k]}: negative radius r = {pts[k, 0]:g} (r must be >= 0)")
-
-    # Drop the repeated closing point of the 'last == first' form.
-    closed_loop = n_in >= 2 and bool(np.all(pts[0] == pts[-1]))
-    if closed_loop:
-        pts, flags = pts[:-1], flags[:-1]
-        flags[0] |= bool(sharp is not None and np.asarray(sharp, dtype=bool)[-1])
-    if len(pts) < 3:
-        raise ProfileError(
-            f"{source}: a profile needs at least 3 distinct points, got {len(pts)}"
-        )
-    if not closed_loop and not (pts[0, 0] == 0.0 and pts[-1, 0] == 0.0):
-        raise ProfileError(
-            f"{source}: profile is not closed: the last point ({_fmt(pts[-1])}) must "
-            f"equal the first ({_fmt(pts[0])}), or both must lie on the axis (r = 0)"
-        )
-
-    n = len(pts)
-    nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
-    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
-    if (seg_len == 0.0).any():
-        k = int(np.argmax(seg_len == 0.0))
-        k2 = (k + 1) % n
-        raise ProfileError(
-            f"{labels[k2]}: repeats the previous point ({_fmt(pts[k])}): zero-length segment"
-        )
+    _check_coordinates(pts, labels)
+    pts, flags, closed_loop = _closed_chain(pts, flags, source)
+    _check_segment_lengths(pts, labels, closed_loop)
 
     # The polygon, closed along the axis when the chain is open.
     area = _signed_area(pts)
     if abs(area) <= 1e-12 * max(1.0, float(np.abs(pts).max()) ** 2):
         raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
     _check_simple(pts, labels, source)
-
-    # Clockwise in the (r right, z up) plane has negative shoelace area.
-    if area > 0.0:
-        order = np.arange(n)[::-1]
-        pts, flags = pts[order], flags[order]
-        labels = [labels[k] for k in order]
-        if closed_loop:
-            # Keep the first point first after reversal.
-            pts, flags = np.roll(pts, 1, axis=0), np.roll(flags, 1)
-
-    # A loop with one segment on the axis is an axis-ended chain: rotate it so
-    # that the axis segment becomes the implicit closing one.
-    if closed_loop:
-        on_axis = (pts[:, 0] == 0.0) & (np.roll(pts[:, 0], -1) == 0.0)
-        if on_axis.any():
-            k = int(np.argmax(on_axis))
-            pts, flags = np.roll(pts, -(k + 1), axis=0), np.roll(flags, -(k + 1))
-            closed_loop = False
+    pts, flags, closed_loop = _canonical_chain(pts, flags, closed_loop, area)
 
     segments = _surface_segments(pts, closed_loop)
     n_start, n_end = _segment_end_normals(pts, flags, closed_loop, segments, crease_angle)
@@ -279,6 +140,74 @@ def make_profile(
         normal_start=n_start,
         normal_end=n_end,
     )
+
+
+def _check_coordinates(pts: np.ndarray, labels: list[str]) -> None:
+    """Every point finite, with a radius >= 0."""
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ProfileError(f"{labels[k]}: non-finite coordinate ({_fmt(pts[k])})")
+    negative = pts[:, 0] < 0.0
+    if negative.any():
+        k = int(np.argmax(negative))
+        raise ProfileError(f"{labels[k]}: negative radius r = {pts[k, 0]:g} (r must be >= 0)")
+
+
+def _closed_chain(pts: np.ndarray, flags: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Drop the repeated closing point of the 'last == first' form (its sharp
+    flag moves to the first point) and check that the chain is closed: a
+    loop, or both ends on the axis. Returns (points, flags, closed_loop)."""
+    closed_loop = len(pts) >= 2 and bool(np.all(pts[0] == pts[-1]))
+    if closed_loop:
+        last_sharp = bool(flags[-1])
+        pts, flags = pts[:-1], flags[:-1]
+        flags[0] |= last_sharp
+    if len(pts) < 3:
+        raise ProfileError(
+            f"{source}: a profile needs at least 3 distinct points, got {len(pts)}"
+        )
+    if not closed_loop and not (pts[0, 0] == 0.0 and pts[-1, 0] == 0.0):
+        raise ProfileError(
+            f"{source}: profile is not closed: the last point ({_fmt(pts[-1])}) must "
+            f"equal the first ({_fmt(pts[0])}), or both must lie on the axis (r = 0)"
+        )
+    return pts, flags, closed_loop
+
+
+def _check_segment_lengths(pts: np.ndarray, labels: list[str], closed_loop: bool) -> None:
+    """No two consecutive points equal (zero-length segment)."""
+    n = len(pts)
+    nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
+    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
+    if (seg_len == 0.0).any():
+        k = int(np.argmax(seg_len == 0.0))
+        k2 = (k + 1) % n
+        raise ProfileError(
+            f"{labels[k2]}: repeats the previous point ({_fmt(pts[k])}): zero-length segment"
+        )
+
+
+def _canonical_chain(
+    pts: np.ndarray, flags: np.ndarray, closed_loop: bool, area: float
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The chain clockwise, and a loop with one segment on the axis rotated
+    into an axis-ended chain. Returns (points, flags, closed_loop)."""
+    # Clockwise in the (r right, z up) plane has negative shoelace area.
+    if area > 0.0:
+        pts, flags = pts[::-1], flags[::-1]
+        if closed_loop:
+            # Keep the first point first after reversal.
+            pts, flags = np.roll(pts, 1, axis=0), np.roll(flags, 1)
+    # A loop with one segment on the axis is an axis-ended chain: rotate it so
+    # that the axis segment becomes the implicit closing one.
+    if closed_loop:
+        on_axis = (pts[:, 0] == 0.0) & (np.roll(pts[:, 0], -1) == 0.0)
+        if on_axis.any():
+            k = int(np.argmax(on_axis))
+            pts, flags = np.roll(pts, -(k + 1), axis=0), np.roll(flags, -(k + 1))
+            closed_loop = False
+    return np.ascontiguousarray(pts), np.ascontiguousarray(flags), closed_loop
 
 
 def _fmt(p: np.ndarray) -> str:
