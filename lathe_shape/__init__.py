@@ -16,7 +16,7 @@ from __future__ import annotations
 import mitsuba as mi
 
 from .plugin.variants import MIN_LLVM_VERSION, check_llvm, on_variant_change, register
-from .profiles.polyline import Profile, ProfileError, make_profile
+from .profiles import Profile, ProfileError, make_profile
 
 __all__ = [
     "MIN_LLVM_VERSION",

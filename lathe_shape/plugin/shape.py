@@ -62,7 +62,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..profiles.polyline import ProfileError, parse_profile_string, read_profile_csv
+from ..profiles import ProfileError, parse_profile_string, read_points
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .params import check_transform, describe_lathe, transform_property, typed_property
 from .variants import register_jit_plugin
@@ -88,13 +88,7 @@ def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray
         path = str(mi.file_resolver().resolve(filename))
         if not os.path.exists(path):
             raise ProfileError(f"{who}: parameter 'filename': profile file '{filename}' not found")
-        if path.lower().endswith((".json", ".toml")):
-            # A profile spec (arcs + wall thickness, paper section 2.3).
-            from ..profiles.arcs import load_profile_spec
-
-            points, sharp, labels = load_profile_spec(path)
-        else:
-            points, sharp, labels = read_profile_csv(path)
+        points, sharp, labels = read_points(path)
         return points, sharp, labels, path
     source = f"{who}: parameter 'profile'"
     points, sharp, labels = parse_profile_string(typed_property(props, "profile", str, "", who), source)
