@@ -46,7 +46,7 @@ def test_lathe_compare(tmp_path):
 
     out = tmp_path / "cmp"
     rc = main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "-o", str(out), "--spp", "2",
-               "--resolution", "24x20", "--mesh-segments", "64"])
+               "--resolution", "24x20", "--mesh-segments", "64", "--variant", VARIANT])
     assert rc == 0
     for name in ("exact.exr", "exact.png", "mesh.exr", "mesh.png", "diff.png"):
         assert (out / name).is_file(), name
@@ -62,13 +62,14 @@ def test_lathe_compare(tmp_path):
 def test_lathe_compare_errors(tmp_path, capsys):
     from lathe_shape.cli.compare import main
 
-    assert main([str(tmp_path / "none.xml"), "-o", str(tmp_path)]) == 2
+    assert main([str(tmp_path / "none.xml"), "-o", str(tmp_path), "--variant", VARIANT]) == 2
     assert "not found" in capsys.readouterr().err
-    assert main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "-o", str(tmp_path), "--spp", "0"]) == 2
+    assert main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "-o", str(tmp_path), "--spp", "0",
+                 "--variant", VARIANT]) == 2
     assert "--spp" in capsys.readouterr().err
     floor_only = tmp_path / "floor.xml"
     floor_only.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
                           '<integer name="width" value="8"/><integer name="height" value="8"/></film>'
                           '</sensor><shape type="rectangle"/></scene>')
-    assert main([str(floor_only), "-o", str(tmp_path / "o")]) == 2
+    assert main([str(floor_only), "-o", str(tmp_path / "o"), "--variant", VARIANT]) == 2
     assert "no lathe" in capsys.readouterr().err
