@@ -113,7 +113,8 @@ def study_arcs(paper, render: Render, figure: str, name: str, steps: list[float]
 
 
 def study(args: argparse.Namespace) -> int:
-    from lathe_shape.tools.paper import load_paper, render_exact, render_size, select_variant
+    from lathe_shape.cli.common import select_variant
+    from lathe_shape.tools.paper import load_paper, render_exact, render_size
     from lathe_shape.tools.placement import error_report, plot_errors
 
     select_variant(args.variant)

@@ -102,7 +102,8 @@ def table_rows(paper, counts, images, times, references, ref_spp: int) -> list[s
 
 
 def reproduce(args: argparse.Namespace) -> int:
-    from lathe_shape.tools.paper import load_paper, render_size, segment_counts, select_variant, write_sheet
+    from lathe_shape.cli.common import select_variant
+    from lathe_shape.tools.paper import load_paper, render_size, segment_counts, write_sheet
 
     select_variant(args.variant)
     paper = load_paper()

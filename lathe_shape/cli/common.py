@@ -82,11 +82,14 @@ def add_output_option(parser: argparse.ArgumentParser, default: str | None = "ou
 
 def add_render_options(parser: argparse.ArgumentParser, seed_help: str = "sampler seed (default: 0)",
                        spp_default: int | None = None, resolution_default: str | None = None,
-                       defines: bool = True, seed_default: int = 0) -> None:
+                       defines: bool = True, seed_default: int = 0, spp_help: str | None = None,
+                       resolution_help: str | None = None) -> None:
     """``--spp``, ``--resolution``, ``--seed``, ``--variant`` and (unless
-    ``defines`` is False, for scenes built in Python) ``-D``."""
-    spp_help = spp_default or "the scene's sampler"
-    size_help = resolution_default or "the scene's film"
+    ``defines`` is False, for scenes built in Python) ``-D``. ``spp_help`` and
+    ``resolution_help`` replace the default named in the help text (for
+    commands that choose their own defaults)."""
+    spp_help = spp_help or spp_default or "the scene's sampler"
+    size_help = resolution_help or resolution_default or "the scene's film"
     parser.add_argument("--spp", type=int, default=spp_default,
                         help=f"samples per pixel (default: {spp_help})")
     parser.add_argument("--resolution", metavar="WxH", default=resolution_default,

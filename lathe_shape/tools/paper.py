@@ -38,7 +38,6 @@ __all__ = [
     "render_size",
     "script_parser",
     "segment_counts",
-    "select_variant",
     "write_derived_profiles",
     "write_sheet",
 ]
@@ -104,19 +103,6 @@ def load_paper(folder: str | os.PathLike = PAPER_SCENES) -> Paper:
                  table["open_problems"])
 
 
-def select_variant(variant: str) -> None:
-    """What the paper scripts do first: select the Mitsuba ``variant`` and
-    register the plugins."""
-    import mitsuba as mi
-
-    if variant not in mi.variants():
-        raise ValueError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
-    mi.set_variant(variant)
-    import lathe_shape
-
-    lathe_shape.register()
-
-
 def script_parser(prog: str, doc: str, output: str, what: str, seed: int, quick: str, defaults: str):
     """The options of the paper scripts (the cli.common convention): ``-o``,
     ``--spp``, ``--resolution``, ``--seed`` (default ``seed``),
@@ -129,7 +115,8 @@ def script_parser(prog: str, doc: str, output: str, what: str, seed: int, quick:
     epilog = f"Without --resolution and --spp: {defaults}; with --quick: {quick}."
     parser = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0], epilog=epilog)
     add_output_option(parser, default=output, what=what)
-    add_render_options(parser, seed_help=f"sampler seed (default: {seed})")
+    add_render_options(parser, seed_help=f"sampler seed (default: {seed})",
+                       spp_help="see below", resolution_help="see below")
     parser.set_defaults(seed=seed)
     parser.add_argument("--quick", action="store_true", help=quick)
     return parser
