@@ -5,29 +5,31 @@ object's size past each one); a closed solid must be crossed an even number
 of times. Prints the leak count and rate per test curve (a closed periodic
 ring, an open egg, the 12-segment glass) and in total.
 
-    python scripts/leak_test_bspline.py [N_RAYS]      (default 1e6 in all)
+    python scripts/leak_test_bspline.py [N_RAYS] [--variant llvm_ad_rgb]   (default 1e6 rays in all)
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
+import argparse
 
 import mitsuba as mi
 
-mi.set_variant("llvm_ad_rgb")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
-from test_bspline import _leak_rate  # noqa: E402
+from lathe_shape.tools.leaks import bspline_leak_rate
 
 
 def main() -> None:
-    n_rays = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
+    args = parser.parse_args()
+    mi.set_variant(args.variant)
+
+    n_rays = int(args.n_rays)
     curves = ("ring", "egg", "glass12")
     per_curve = n_rays // len(curves)
     total_leaks = total_entered = 0
     for index, curve in enumerate(curves):
-        rate, entered = _leak_rate(curve, per_curve, 100 + index)
+        rate, entered = bspline_leak_rate(curve, per_curve, 100 + index)
         leaks = round(rate * entered)
         total_leaks += leaks
         total_entered += entered

@@ -160,11 +160,12 @@ def threaded_bvh(
 # Kernel data
 # ---------------------------------------------------------------------------
 
-def opaque(value, cls=mi.Float):
-    """``cls(value)`` marked opaque: its values are passed to kernels as
-    parameters instead of being baked in as literals, so that a kernel
-    traced once serves every profile (no recompilation on new data)."""
-    result = cls(value)
+def opaque(value, cls=None):
+    """``cls(value)`` (default ``mi.Float``) marked opaque: its values are
+    passed to kernels as parameters instead of being baked in as literals,
+    so that a kernel traced once serves every profile (no recompilation on
+    new data)."""
+    result = (mi.Float if cls is None else cls)(value)
     dr.make_opaque(result)
     return result
 
