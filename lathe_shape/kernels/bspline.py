@@ -399,10 +399,12 @@ class _Ray(LatheRay):
         self.vertical = ~horiz                # parallel to the axis
         self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
 
-    def r2(self, s):
-        """``r(s)^2 = a (s - s*)^2 + r0^2`` (symmetric about ``s*``)."""
-        e = s - self.s_star
-        return dr.fma(self.a, e * e, self.r0sq)
+    def r2_max(self, lo, hi):
+        """The largest ``r(s)^2 = a (s - s*)^2 + r0^2`` over ``[lo, hi]``: at
+        the end farther from ``s*``."""
+        e0 = lo - self.s_star
+        e1 = hi - self.s_star
+        return dr.fma(self.a, dr.maximum(e0 * e0, e1 * e1), self.r0sq)
 
 
 def _box_enter(ray: _Ray, box, best, active):

@@ -279,9 +279,12 @@ class LatheRay:
         self.first = mi.UInt32(copy) * data.n_nodes
         self.end = self.first + data.n_nodes
 
-    def r2(self, s: mi.Float) -> mi.Float:
-        """Squared distance ``r(s)^2`` of the ray from the axis."""
-        return dr.fma(dr.fma(self.a, s, 2 * self.b), s, self.c)
+    def r2_max(self, lo: mi.Float, hi: mi.Float) -> mi.Float:
+        """The largest ``r(s)^2`` over ``[lo, hi]``: ``r(s)^2`` is convex, so
+        it is the larger of its values at the ends."""
+        r2_lo = dr.fma(dr.fma(self.a, lo, 2 * self.b), lo, self.c)
+        r2_hi = dr.fma(dr.fma(self.a, hi, 2 * self.b), hi, self.c)
+        return dr.maximum(r2_lo, r2_hi)
 
 
 # ---------------------------------------------------------------------------
@@ -293,15 +296,14 @@ def enter_annular_box(ray: LatheRay, zmin, zmax, r_lo, r_hi, rmin2, s_best):
     at some ``s`` in ``(ray.s_lo, s_best)``.
 
     ``(r_lo, r_hi)`` is the kind's interval where ``r(s) <= rmax``; ``rmin2``
-    is ``rmin^2``. Within the slab and that interval, ``r(s)^2`` is convex,
-    so its maximum is at an end: the box is entered when that maximum
-    reaches ``rmin^2``.
+    is ``rmin^2``. The box is entered when the largest ``r(s)^2`` over the
+    part of the ray within the slab and that interval reaches ``rmin^2``.
     """
     zl = (zmin - ray.o.z) * ray.inv_dz
     zh = (zmax - ray.o.z) * ray.inv_dz
     lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), r_lo), ray.s_lo)
     hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), r_hi), s_best)
-    return (lo <= hi) & ((ray.r2(lo) >= rmin2) | (ray.r2(hi) >= rmin2))
+    return (lo <= hi) & (ray.r2_max(lo, hi) >= rmin2)
 
 
 def bvh_link(links: mi.UInt32, node: mi.UInt32, active: mi.Bool):
