@@ -12,9 +12,6 @@ Usage: ``python scripts/leak_test.py [n_rays] [--variant llvm_ad_rgb]``
 
 from __future__ import annotations
 
-import argparse
-
-import mitsuba as mi
 import numpy as np
 
 from lathe_shape.kernels.polyline import build_polyline_data
@@ -23,13 +20,8 @@ from lathe_shape.tools import reference as ref
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
-    args = parser.parse_args()
-    mi.set_variant(args.variant)
-
-    n_rays = int(args.n_rays)
+    args = leaks.leak_test_arguments(__doc__.splitlines()[0])
+    n_rays = args.n_rays
     rng = np.random.default_rng(2024)
     profiles = ref.test_profiles(rng)
     per_profile = n_rays // len(profiles) + 1

@@ -10,30 +10,21 @@ ring, an open egg, the 12-segment glass) and in total.
 
 from __future__ import annotations
 
-import argparse
-
-import mitsuba as mi
-
-from lathe_shape.tools.leaks import bspline_leak_rate
+from lathe_shape.tools import leaks
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
-    args = parser.parse_args()
-    mi.set_variant(args.variant)
-
-    n_rays = int(args.n_rays)
+    args = leaks.leak_test_arguments(__doc__.splitlines()[0])
+    n_rays = args.n_rays
     curves = ("ring", "egg", "glass12")
     per_curve = n_rays // len(curves)
     total_leaks = total_entered = 0
     for index, curve in enumerate(curves):
-        rate, entered = bspline_leak_rate(curve, per_curve, 100 + index)
-        leaks = round(rate * entered)
-        total_leaks += leaks
+        rate, entered = leaks.bspline_leak_rate(curve, per_curve, 100 + index)
+        n_leaks = round(rate * entered)
+        total_leaks += n_leaks
         total_entered += entered
-        print(f"{curve:<8} rays {per_curve:>8} entering {entered:>8} leaks {leaks:>5} rate {rate:.2e}",
+        print(f"{curve:<8} rays {per_curve:>8} entering {entered:>8} leaks {n_leaks:>5} rate {rate:.2e}",
               flush=True)
     print(f"total: {per_curve * len(curves)} rays, {total_entered} entering, {total_leaks} leaks, "
           f"leak rate {total_leaks / max(total_entered, 1):.2e} (per entering ray)")

@@ -95,17 +95,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..profiles.bspline import power_coefficients
-from .common import (
-    LatheData,
-    LatheGeometry,
-    LatheHit,
-    LatheRay,
-    bvh_link,
-    bvh_next,
-    enter_annular_box,
-    opaque,
-    threaded_bvh,
-)
+from . import common
+from .common import LatheData, LatheGeometry, LatheHit, LatheRay, opaque, threaded_bvh
 
 __all__ = [
     "BSplineData",
@@ -413,7 +404,7 @@ def _box_enter(ray: _Ray, box, best, active):
     # r(s)^2 = a (s - s*)^2 + r0^2 <= rmax^2: symmetric about s*.
     disc = dr.fma(box.x, box.x, -ray.r0sq)
     h = dr.select(ray.vertical, dr.inf, dr.sqrt(dr.maximum(disc, 0.0) * ray.inv_a))
-    return active & (disc >= 0) & enter_annular_box(ray, box.z, box.w, ray.s_star - h,
+    return active & (disc >= 0) & common.enter_annular_box(ray, box.z, box.w, ray.s_star - h,
                                                      ray.s_star + h, box.y, best)
 
 
@@ -459,7 +450,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
     whose box the ray enters before ``best`` and whose Bernstein hull of
     ``F`` does not exclude a root (or a grazing contact)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
-    link, is_leaf, leaf = bvh_link(data.links, node, active)
+    link, is_leaf, leaf = common.bvh_link(data.links, node, active)
     enter = _box_enter(ray, box, best, active)
     m = enter & is_leaf
     cand = mi.Bool(False)  # an entered leaf that F may cross or touch
@@ -471,7 +462,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
         cand = m & ~_one_sign(G, tol)
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
-    nxt = dr.select(cand, node, bvh_next(node, link, is_leaf, enter))
+    nxt = dr.select(cand, node, common.bvh_next(node, link, is_leaf, enter))
     return cand, nxt
 
 
@@ -620,7 +611,7 @@ def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
         cand = mi.Bool(False)
         while active & (node < end) & ~cand:
             cand, node = _visit(data, ray, node, best_s, active & (node < end))
-        leaf = bvh_link(data.links, node, cand)[2]
+        leaf = common.bvh_link(data.links, node, cand)[2]
         prev = mi.Float(best_s)
         best_s, best_u, best_seg = _solve_leaf(data, leaf, ray, best_s, best_u, best_seg, cand)
         hit |= best_s < prev

@@ -14,6 +14,7 @@ Needs an active JIT Mitsuba variant.
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable
 
 import drjit as dr
@@ -24,7 +25,19 @@ from ..kernels.bspline import build_bspline_data, intersect_bspline
 from ..kernels.polyline import PolylineData, intersect_polyline, polyline_geometry
 from . import reference as ref
 
-__all__ = ["polyline_callback", "crossing_leaks", "bspline_leak_rate"]
+__all__ = ["leak_test_arguments", "polyline_callback", "crossing_leaks", "bspline_leak_rate"]
+
+
+def leak_test_arguments(description: str) -> argparse.Namespace:
+    """The leak test scripts' options (``n_rays`` in all, default 1e6, and
+    ``--variant``), parsed; selects the Mitsuba variant."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
+    args = parser.parse_args()
+    mi.set_variant(args.variant)
+    args.n_rays = int(args.n_rays)
+    return args
 
 
 def polyline_callback(data: PolylineData) -> Callable:
