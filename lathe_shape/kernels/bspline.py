@@ -390,12 +390,12 @@ class _Ray(LatheRay):
         self.vertical = ~horiz                # parallel to the axis
         self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
 
-    def r2_max(self, lo, hi):
-        """The largest ``r(s)^2 = a (s - s*)^2 + r0^2`` over ``[lo, hi]``: at
-        the end farther from ``s*``."""
+    def reaches(self, lo, hi, r2):
+        """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
+        hi]``: its largest value there is at the end farther from ``s*``."""
         e0 = lo - self.s_star
         e1 = hi - self.s_star
-        return dr.fma(self.a, dr.maximum(e0 * e0, e1 * e1), self.r0sq)
+        return dr.fma(self.a, dr.maximum(e0 * e0, e1 * e1), self.r0sq) >= r2
 
 
 def _box_enter(ray: _Ray, box, best, active):
