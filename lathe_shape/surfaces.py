@@ -1,7 +1,8 @@
 """Profile kinds as revolved surfaces: tessellation + exact kernels.
 
-A *surface* bundles what the ``lathe`` plugin needs from one profile kind,
-without any plugin code (so a native ``mi.Shape`` can reuse it):
+A *surface* (the :class:`Surface` protocol) bundles what the ``lathe`` plugin
+needs from one profile kind, without any plugin code (so a native
+``mi.Shape`` can reuse it):
 
 * ``tessellate(steps)`` -- the reference mesh (local frame);
 * ``intersect(o, d, tmax, active)`` / ``occluded(...)`` -- the exact kernel
@@ -14,6 +15,8 @@ B-spline, degree-6 roots, exact normals).
 """
 
 from __future__ import annotations
+
+from typing import Protocol
 
 import mitsuba as mi
 import numpy as np
@@ -28,69 +31,99 @@ from .kernels.bspline import (
 from .kernels.common import LatheGeometry, LatheHit
 from .kernels.polyline import (
     PolylineData,
-    build_polyline_data,
     intersect_polyline,
     occluded_polyline,
     polyline_geometry,
+    profile_polyline_data,
 )
 from .profiles import bspline as bs
 from .profiles.bspline import BSplineProfile, make_bspline_profile
 from .profiles.polyline import Profile, ProfileError, make_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
-__all__ = ["PolylineSurface", "BSplineSurface", "SURFACE_KINDS", "make_surface"]
+__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SURFACE_KINDS", "make_surface"]
 
 
-class PolylineSurface:
+class Surface(Protocol):
+    """What a profile kind supplies to the ``lathe`` plugin."""
+
+    #: The kind's name (the plugin's ``kind`` parameter).
+    kind: str
+    #: Whether shading normals are interpolated (always True for B-splines).
+    smooth: bool
+    #: The validated profile (numpy only).
+    profile: Profile | BSplineProfile
+
+    def tessellate(self, steps: int) -> TriangleMesh:
+        """The reference mesh with ``steps`` azimuthal steps (local frame)."""
+
+    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
+        """Nearest hit with ``0 < t < tmax`` of local-frame rays ``o + t d``."""
+
+    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
+        """Whether local-frame rays hit the surface at some ``0 < t < tmax``."""
+
+    def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
+        """Normals, uv and partials at a hit ``(seg, u)`` at local point ``p``."""
+
+
+class _KernelSurface:
+    """A surface whose exact kernel works on opaque data built on first use.
+
+    Subclasses set ``_intersect`` and ``_occluded`` (the kind's kernels, as
+    ``staticmethod``) and implement ``_build_data``."""
+
+    _data = None
+
+    def _build_data(self):
+        raise NotImplementedError
+
+    @property
+    def data(self):
+        """Opaque kernel buffers, built on first use."""
+        if self._data is None:
+            self._data = self._build_data()
+        return self._data
+
+    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
+        return self._intersect(self.data, o, d, tmax, active)
+
+    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
+        return self._occluded(self.data, o, d, tmax, active)
+
+
+class PolylineSurface(_KernelSurface):
     """Revolved polyline profile (paper Method 1)."""
 
     kind = "polyline"
+    _intersect = staticmethod(intersect_polyline)
+    _occluded = staticmethod(occluded_polyline)
 
     def __init__(self, profile: Profile, smooth: bool = True) -> None:
         self.profile = profile
         self.smooth = smooth
-        self._data = None
 
     def tessellate(self, steps: int) -> TriangleMesh:
         return tessellate_profile(self.profile, steps, smooth=self.smooth)
 
-    def _end_normals(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.smooth:
-            return self.profile.normal_start, self.profile.normal_end
-        flat = self.profile.segment_normals()
-        return flat, flat
-
-    @property
-    def data(self) -> PolylineData:
-        """Opaque kernel buffers, built on first use."""
-        if self._data is None:
-            p0, p1 = self.profile.segment_points()
-            n0, n1 = self._end_normals()
-            self._data = build_polyline_data(
-                p0[:, 0], p0[:, 1], p1[:, 0], p1[:, 1], n0[:, 0], n0[:, 1], n1[:, 0], n1[:, 1]
-            )
-        return self._data
-
-    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
-        return intersect_polyline(self.data, o, d, tmax, active)
-
-    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
-        return occluded_polyline(self.data, o, d, tmax, active)
+    def _build_data(self) -> PolylineData:
+        return profile_polyline_data(self.profile, self.smooth)
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return polyline_geometry(self.data, p, seg, u, self.smooth)
 
 
-class BSplineSurface:
+class BSplineSurface(_KernelSurface):
     """Revolved uniform cubic B-spline profile (paper Method 2)."""
 
     kind = "bspline"
     smooth = True
+    _intersect = staticmethod(intersect_bspline)
+    _occluded = staticmethod(occluded_bspline)
 
     def __init__(self, profile: BSplineProfile, max_angle_deg: float = 1.0) -> None:
         self.profile = profile
         self.max_angle_deg = max_angle_deg
-        self._data = None
 
     def sample_profile(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Adaptive (r, z) samples of the curve, exact unit normals there, and
@@ -127,18 +160,8 @@ class BSplineSurface:
         bands = np.stack([start, start + 1], axis=1)
         return revolve(points, normals, v, bands, steps)
 
-    @property
-    def data(self) -> BSplineData:
-        """Opaque kernel buffers, built on first use."""
-        if self._data is None:
-            self._data = build_bspline_data(self.profile.segment_controls)
-        return self._data
-
-    def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
-        return intersect_bspline(self.data, o, d, tmax, active)
-
-    def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
-        return occluded_bspline(self.data, o, d, tmax, active)
+    def _build_data(self) -> BSplineData:
+        return build_bspline_data(self.profile.segment_controls)
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return bspline_geometry(self.data, p, seg, u)

@@ -1,7 +1,8 @@
 """Kernel-only timing: exact B-spline lathe intersection vs the polyline
 kernel on its 31-segment adaptive approximation (no path tracer).
 
-The glass is the 12-segment B-spline of ``scripts/bench_spline.py``. Three
+The glass is the 12-segment B-spline of ``scripts/bench_spline.py``
+(``lathe_shape.tools.reference.SPLINE_GLASS``). Three
 ray sets, each ``--rays`` rays, in the lathe's local frame:
 
 * ``camera``: the wine_glass camera's pinhole rays through a pixel grid
@@ -22,20 +23,21 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import sys
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "scripts"))
+from lathe_shape.kernels import polyline as P
+from lathe_shape.profiles import bspline as B
+from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
+from lathe_shape.profiles.polyline import make_profile
+from lathe_shape.tools.reference import SPLINE_GLASS
 
 
 def load_kernel(path: str | None):
+    """The B-spline kernel module: the package's, or the file ``path``."""
     if path is None:
         from lathe_shape.kernels import bspline
         return bspline
@@ -70,7 +72,7 @@ def camera_rays(seg: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def surface_rays(seg: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
-    from lathe_shape.profiles import bspline as B
+    """Rays leaving random surface points in uniformly random directions."""
     T = rng.uniform(0, len(seg), n)
     i = np.minimum(T.astype(int), len(seg) - 1)
     r, z = B.evaluate(seg, i, T - i)
@@ -82,6 +84,7 @@ def surface_rays(seg: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
 
 
 def inside_rays(seg: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Rays from random points of the bounding cylinder, random directions."""
     pts = seg.reshape(-1, 2)
     rmax, zmin, zmax = pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max()
     rad = rmax * np.sqrt(rng.uniform(size=n))
@@ -119,21 +122,12 @@ def main() -> None:
     parser.add_argument("--sets", default="camera,surface,inside")
     args = parser.parse_args()
     mi.set_variant(args.variant)
-    from bench_spline import SPLINE_GLASS
-
-    from lathe_shape.kernels import polyline as P
-    from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
-    from lathe_shape.profiles.polyline import make_profile
-
     K = load_kernel(args.module)
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")
     seg = spline.segment_controls
     bdata = K.build_bspline_data(seg)
     prof = make_profile(to_polyline(seg, 32, "adaptive"), source="adaptive polyline")
-    p0, p1 = prof.segment_points()
-    pdata = P.build_polyline_data(p0[:, 0], p0[:, 1], p1[:, 0], p1[:, 1],
-                                  prof.normal_start[:, 0], prof.normal_start[:, 1],
-                                  prof.normal_end[:, 0], prof.normal_end[:, 1])
+    pdata = P.profile_polyline_data(prof, smooth=True)
     rng = np.random.default_rng(0)
     makers = {"camera": lambda: camera_rays(seg, args.rays),
               "surface": lambda: surface_rays(seg, args.rays, rng),

@@ -5,23 +5,19 @@ sampled with different segment counts. Rays come from a pinhole camera
 looking at the glass (about half of them hit); each timing excludes the
 first (compiling) call and takes the best of several runs.
 
-Usage: ``python scripts/bench_kernel.py [n_rays]``
+Usage: ``python scripts/bench_kernel.py [n_rays] [--variant llvm_ad_rgb]``
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-mi.set_variant('llvm_ad_rgb')
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from lathe_shape.kernels.polyline import build_polyline_data, intersect_polyline  # noqa: E402
+from lathe_shape.kernels.polyline import build_polyline_data, intersect_polyline
 
 
 def glass_points(n_seg: int) -> np.ndarray:
@@ -38,16 +34,9 @@ def glass_points(n_seg: int) -> np.ndarray:
 
 
 def profile_data(n_seg: int):
-    """Segment arrays and kernel data of the benchmark glass."""
+    """Segment count and kernel data (flat normals) of the benchmark glass."""
     pts = glass_points(n_seg)
-    r0, z0 = pts[:-1].T
-    r1, z1 = pts[1:].T
-    n_r = -(z1 - z0)
-    n_z = r1 - r0
-    norm = np.hypot(n_r, n_z)
-    n_r, n_z = n_r / norm, n_z / norm
-    data = build_polyline_data(r0, z0, r1, z1, n_r, n_z, n_r, n_z)
-    return len(r0), data
+    return len(pts) - 1, build_polyline_data(pts[:-1], pts[1:])
 
 
 def camera_rays(n: int):
@@ -78,7 +67,12 @@ def bench(data, o, d, repeats: int = 5) -> float:
 
 
 def main() -> None:
-    n_rays = int(sys.argv[1]) if len(sys.argv) > 1 else 1 << 20
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("n_rays", nargs="?", type=int, default=1 << 20, help="rays (default 2^20)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
+    args = parser.parse_args()
+    mi.set_variant(args.variant)
+    n_rays = args.n_rays
     o, d = camera_rays(n_rays)
     rates = {}
     for n_seg in (31, 300):

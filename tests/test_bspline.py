@@ -9,7 +9,6 @@ and solved with numpy's companion-matrix eigenvalues (the cubic
 
 from __future__ import annotations
 
-import time
 import zlib
 
 import numpy as np
@@ -19,21 +18,13 @@ mi = pytest.importorskip("mitsuba")
 dr = pytest.importorskip("drjit")
 
 from lathe_shape.profiles import bspline as B  # noqa: E402
+from lathe_shape.tools import reference as ref  # noqa: E402
+from lathe_shape.tools.leaks import bspline_leak_rate  # noqa: E402
 
-#: A glass-wall ring (closed periodic B-spline): thick base, thin wall, rim.
-RING = np.array([[1.0, 0.0], [1.2, 0.0], [1.2, 1.5], [1.1, 2.0], [1.0, 1.5],
-                 [1.0, 0.2], [1.0, 0.0]])
-#: An egg / vase (open B-spline, both ends on the axis).
-EGG = np.array([[0.0, 0.0], [0.6, 0.0], [1.0, 0.6], [0.9, 1.5], [0.4, 2.0], [0.0, 2.1]])
-#: A 12-segment closed glass profile (12 distinct control points).
-GLASS12 = np.array([[0.0 + 0.3, 0.0], [0.9, 0.0], [1.0, 0.15], [0.5, 0.3], [0.3, 0.8],
-                    [0.8, 1.4], [1.1, 2.4], [1.0, 2.5], [0.9, 2.4], [0.6, 1.5],
-                    [0.15, 1.0], [0.2, 0.2], [0.3, 0.0]])
-
-
-@pytest.fixture(scope="module", autouse=True)
-def variant():
-    mi.set_variant("llvm_ad_rgb")
+#: The test curves (see lathe_shape.tools.reference.BSPLINE_CURVES): a
+#: glass-wall ring (closed periodic), an egg / vase (open, both ends on the
+#: axis) and a 12-segment closed glass profile.
+RING, EGG, GLASS12 = (ref.BSPLINE_CURVES[k] for k in ("ring", "egg", "glass12"))
 
 
 def kernels():
@@ -273,62 +264,16 @@ def _grazing(coef, org, d, scale, delta=1e-3):
     return flip
 
 
-def _curve(name):
-    pts = {"ring": RING, "egg": EGG, "glass12": GLASS12}[name]
-    seg = B.bspline_segments(B.orient_clockwise(pts))
-    return seg, B.power_coefficients(seg)
-
-
-def _ray_set(kind, seg, rng, n):
-    """Rays of one kind around the curve ``seg``."""
-    T = rng.uniform(0, len(seg), n)
-    i = np.minimum(T.astype(int), len(seg) - 1)
-    r, z = B.evaluate(seg, i, T - i)
-    phi = rng.uniform(0, 2 * np.pi, n)
-    on_curve = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-    lo = seg.reshape(-1, 2).min(axis=0)
-    hi = seg.reshape(-1, 2).max(axis=0)
-    if kind == "outside":
-        tgt = on_curve + rng.normal(scale=0.1, size=(n, 3))
-        d = rng.normal(size=(n, 3))
-        d /= np.linalg.norm(d, axis=1)[:, None]
-        org = tgt - 6 * d
-        d *= rng.uniform(0.3, 3.0, (n, 1))  # not unit length
-    elif kind == "inside":
-        org = np.stack([rng.uniform(-hi[0], hi[0], n), rng.uniform(-hi[0], hi[0], n),
-                        rng.uniform(lo[1], hi[1], n)], axis=1)
-        d = rng.normal(size=(n, 3))
-    elif kind == "horizontal":
-        tgt = on_curve + rng.normal(scale=0.05, size=(n, 3))
-        a = rng.uniform(0, 2 * np.pi, n)
-        d = np.stack([np.cos(a), np.sin(a), np.zeros(n)], axis=1)
-        org = tgt - 5 * d
-    elif kind == "near_horizontal":
-        tgt = on_curve + rng.normal(scale=0.05, size=(n, 3))
-        a = rng.uniform(0, 2 * np.pi, n)
-        dz = rng.choice([1e-4, 1e-3, 1e-2, 3e-2], n) * rng.choice([-1, 1], n)
-        d = np.stack([np.cos(a), np.sin(a), dz], axis=1)
-        org = tgt - 5 * d
-    elif kind == "vertical":
-        org = np.stack([rng.uniform(-hi[0], hi[0], n), rng.uniform(-hi[0], hi[0], n),
-                        np.full(n, lo[1] - 3.0)], axis=1)
-        d = np.tile([0.0, 0.0, 1.0], (n, 1)) * rng.choice([1, -1], (n, 1))
-        org[d[:, 2] < 0, 2] = hi[1] + 3.0
-    else:
-        raise ValueError(kind)
-    return org, d
-
-
 @pytest.mark.parametrize("curve", ["ring", "egg", "glass12"])
 @pytest.mark.parametrize("kind", ["outside", "inside", "horizontal", "near_horizontal",
                                   "vertical"])
 def test_kernel_matches_reference(curve, kind):
     K = kernels()
-    seg, coef = _curve(curve)
+    seg, coef = ref.bspline_curve(curve)
     data = K.build_bspline_data(seg)
     scale = float(np.linalg.norm(np.ptp(seg.reshape(-1, 2), axis=0)))
     rng = np.random.default_rng(zlib.crc32(f"{curve}/{kind}".encode()))
-    org, d = _ray_set(kind, seg, rng, 1200)
+    org, d = ref.bspline_rays(kind, seg, rng, 1200)
     rt, rseg, ru = _reference(coef, org, d)
     kt, kseg, ku, kv = _kernel_hits(data, org, d)
     rv = np.isfinite(rt)
@@ -362,10 +307,10 @@ def test_kernel_matches_reference(curve, kind):
 
 def test_kernel_tmax_and_occlusion():
     K = kernels()
-    seg, coef = _curve("ring")
+    seg, coef = ref.bspline_curve("ring")
     data = K.build_bspline_data(seg)
     rng = np.random.default_rng(3)
-    org, d = _ray_set("outside", seg, rng, 2000)
+    org, d = ref.bspline_rays("outside", seg, rng, 2000)
     rt, _, _ = _reference(coef, org, d)
     tmax = np.where(rng.uniform(size=len(org)) < 0.5, rt * 0.999, rt * 1.001)
     tmax[~np.isfinite(tmax)] = 10.0
@@ -383,7 +328,7 @@ def test_tangent_grazing_rays():
     +-delta along the normal: inside they must hit (near the touching
     point), outside miss locally; exactly tangent ones either."""
     K = kernels()
-    seg, coef = _curve("egg")
+    seg, coef = ref.bspline_curve("egg")
     data = K.build_bspline_data(seg)
     rng = np.random.default_rng(5)
     n = 1000
@@ -423,36 +368,9 @@ def test_tangent_grazing_rays():
     assert np.mean(kv & ~near & ~agree) < 0.01
 
 
-def _leak_rate(curve, n, seed):
-    """Fraction of rays entering a closed lathe with an odd crossing count."""
-    K = kernels()
-    seg, _ = _curve(curve)
-    data = K.build_bspline_data(seg)
-    rng = np.random.default_rng(seed)
-    org, d = _ray_set("outside", seg, rng, n)
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    scale = float(np.linalg.norm(np.ptp(seg.reshape(-1, 2), axis=0)))
-    o = mi.Point3f(org.T.astype(np.float32))
-    dj = mi.Vector3f(d.T.astype(np.float32))
-    active = mi.Bool(np.ones(n, bool))
-    count = mi.UInt32(0)
-    eps = 1e-4 * scale
-    for _ in range(16):
-        hit = K.intersect_bspline(data, o, dj, mi.Float(dr.inf), active)
-        active &= hit.valid
-        count += mi.UInt32(active)
-        o = dr.select(active, dr.fma(dj, hit.t + eps, o), o)
-        dr.eval(o, active, count)
-        if not dr.any(active):
-            break
-    count = np.array(count)
-    entered = count > 0
-    return np.mean(count[entered] % 2 == 1), int(entered.sum())
-
-
 @pytest.mark.parametrize("curve", ["ring", "egg", "glass12"])
 def test_watertight(curve):
-    leak, entered = _leak_rate(curve, 20000, 11)
+    leak, entered = bspline_leak_rate(curve, 20000, 11)
     print(f"\n{curve}: leak rate {leak:.2e} over {entered} entering rays")
     assert leak < 2e-3
 
@@ -460,7 +378,7 @@ def test_watertight(curve):
 def test_kernel_in_outer_symbolic_loop():
     """The kernel traces inside a caller's @dr.syntax loop (no dr.eval)."""
     K = kernels()
-    seg, _ = _curve("ring")
+    seg, _ = ref.bspline_curve("ring")
     data = K.build_bspline_data(seg)
     org = mi.Point3f(np.array([[-5.0, 0.0, 1.0], [-5.0, 0.3, 0.7]], np.float32).T)
     d = mi.Vector3f(1.0, 0.0, 0.0)
@@ -480,38 +398,11 @@ def _count_loop(K, data, o, d):
     return count
 
 
-def test_timing_report():
-    """Rays per second for the 12-segment curve, 1e6 random rays (printed)."""
-    K = kernels()
-    seg, _ = _curve("glass12")
-    assert len(seg) == 12
-    data = K.build_bspline_data(seg)
-    rng = np.random.default_rng(0)
-    n = 1_000_000
-    org, d = _ray_set("outside", seg, rng, n)
-    o = mi.Point3f(org.T.astype(np.float32))
-    dj = mi.Vector3f(d.T.astype(np.float32))
-
-    def run():
-        hit = K.intersect_bspline(data, o, dj, mi.Float(dr.inf), mi.Bool(True))
-        dr.eval(hit.t, hit.seg, hit.u, hit.valid)
-        dr.sync_thread()  # LLVM kernels run asynchronously
-        return hit
-
-    dr.eval(o, dj)
-    run()  # compile (or load from the kernel cache)
-    t0 = time.perf_counter()
-    hit = run()
-    dt = time.perf_counter() - t0
-    print(f"\nglass12: {n / dt / 1e6:.2f} Mrays/s ({dt:.2f} s), "
-          f"hit fraction {np.mean(np.array(hit.valid)):.3f}")
-
-
 def test_leaf_joints_are_watertight():
     """Rays aimed exactly at the cuts between leaves (inside segments and at
     segment joints) from outside hit the surface like the reference."""
     K = kernels()
-    seg, coef = _curve("glass12")
+    seg, coef = ref.bspline_curve("glass12")
     data = K.build_bspline_data(seg)
     cuts = []
     for i in range(len(seg)):
@@ -540,11 +431,11 @@ def test_culling_and_fast_path_agree_with_full_chain(monkeypatch):
     """Without the Bernstein sign tests (no hull culling of leaves, every
     leaf solved by the full derivative chain) the hits are the same."""
     K = kernels()
-    seg, _ = _curve("glass12")
+    seg, _ = ref.bspline_curve("glass12")
     data = K.build_bspline_data(seg)
     rng = np.random.default_rng(23)
-    org, d = _ray_set("outside", seg, rng, 3000)
-    org2, d2 = _ray_set("inside", seg, rng, 3000)
+    org, d = ref.bspline_rays("outside", seg, rng, 3000)
+    org2, d2 = ref.bspline_rays("inside", seg, rng, 3000)
     org, d = np.concatenate([org, org2]), np.concatenate([d, d2])
     kt, kseg, _, kv = _kernel_hits(data, org, d)
     monkeypatch.setattr(K, "_one_sign", lambda c, tol: dr.zeros(mi.Bool, dr.width(c[0])) & False)

@@ -2,26 +2,20 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 
-mi.set_variant('llvm_ad_rgb')
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from lathe_shape.kernels.polyline import (  # noqa: E402
+from lathe_shape.kernels.polyline import (
     PolylineHit,
     build_polyline_data,
     intersect_polyline,
     occluded_polyline,
     polyline_geometry,
 )
-from lathe_shape.tools import reference as ref  # noqa: E402
+from lathe_shape.tools import leaks
+from lathe_shape.tools import reference as ref
 
 PROFILES = ref.test_profiles(np.random.default_rng(7))
 NAMES = [name for name, _ in PROFILES]
@@ -36,10 +30,14 @@ def seg_normals(prof):
 
 
 def make_data(prof, normals=None):
-    n_r, n_z = seg_normals(prof)
+    """Kernel data of a test profile; ``normals``: ``(nr0, nz0, nr1, nz1)``
+    shading normals (default: flat)."""
+    start, end = ref.segment_points(prof)
     if normals is None:
-        normals = (n_r, n_z, n_r, n_z)
-    return build_polyline_data(*prof, *normals)
+        return build_polyline_data(start, end)
+    nr0, nz0, nr1, nz1 = normals
+    return build_polyline_data(start, end, np.stack([nr0, nz0], axis=1),
+                               np.stack([nr1, nz1], axis=1))
 
 
 def run(data, o, d, tmax=None):
@@ -152,24 +150,12 @@ def test_watertight():
     rng = np.random.default_rng(5)
     total_hits = total_leaks = 0
     for _, prof in PROFILES:
-        data = make_data(prof)
-
-        def intersect(o, d, active, data=data):
-            o32 = mi.Point3f(o.T.astype(np.float32))
-            d32 = mi.Vector3f(d.T.astype(np.float32))
-            hit = intersect_polyline(data, o32, d32,
-                                     dr.full(mi.Float, dr.inf, len(o)),
-                                     mi.Bool(active))
-            p = o32 + dr.select(hit.valid, hit.t, 0) * d32
-            geo = polyline_geometry(data, p, hit.seg, hit.u, False)
-            return (hit.t.numpy().astype(np.float64), hit.valid.numpy(),
-                    geo.n.numpy().T.astype(np.float64))
-
+        intersect = leaks.polyline_callback(make_data(prof))
         o, d = ref.random_rays(rng, prof, 16000)
         o, d = f32(o), f32(d)
         outside = ~ref.inside_profile(prof, o)
-        leak, n_hits = ref.crossing_leaks(intersect, prof, o[outside],
-                                          d[outside])
+        leak, n_hits = leaks.crossing_leaks(intersect, prof, o[outside],
+                                            d[outside])
         total_hits += np.sum(n_hits > 0)
         total_leaks += np.sum(leak)
     assert total_hits > 50000

@@ -1,4 +1,4 @@
-"""Exact ray intersection with a revolved cubic B-spline (method.md, Method 2).
+"""Exact ray intersection with a revolved cubic B-spline (docs/method.md, Method 2).
 
 Pure Dr.Jit (float32, any JIT variant of Mitsuba); no plugin code. All
 functions work in the lathe's LOCAL frame, whose axis is +z, and are
@@ -39,7 +39,8 @@ both sides (hits on a joint are found by both neighbours), and stores its
 cubics in that local parameter, both in power form and as Bernstein (Bezier)
 control points, plus an exact, padded annular bounding box.
 
-Culling: a bounding volume hierarchy over the leaves' annular boxes in the
+Culling (the skeleton shared with the polyline kernel, kernels/common.py):
+a bounding volume hierarchy over the leaves' annular boxes in the
 (r, z) plane, stored four times as a threaded (stackless, pre-order with
 miss links) array whose copies differ in child order; each ray takes the
 copy that visits the lower / upper and outer / inner child first according
@@ -77,9 +78,12 @@ iteration count only limits precision; the steps run in a symbolic loop
 that ends once all lanes of a packet converged. A critical point where ``|F|`` is
 below ``tol`` is a tangent (double) root: a grazing hit.
 
-Precision (traps.md, float32 cancellation): the ray origin is first moved to
-where the ray enters the lathe's bounding cylinder, all coefficients are
-built from that nearby origin, and ``s`` is shifted back at the end.
+Precision: in float32 the coefficients of ``F`` would lose most of their
+digits to cancellation for a ray that starts far from the lathe, so the ray
+set-up of kernels/common.py first moves the origin to where the ray enters
+the lathe's bounding cylinder; all coefficients are built from that nearby
+origin (with a unit direction, so ``s`` is a length) and ``s`` is shifted
+back at the end.
 """
 
 from __future__ import annotations
@@ -91,7 +95,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..profiles.bspline import power_coefficients
-from .common import LEAF, LatheGeometry, LatheHit, threaded_bvh
+from . import common
+from .common import LatheData, LatheGeometry, LatheHit, LatheRay, opaque, threaded_bvh
 
 __all__ = [
     "BSplineData",
@@ -139,10 +144,10 @@ _TANGENT_ULPS = 8.0
 _PAIR_WIDTH = 4.0
 
 
-class BSplineData:
+class BSplineData(LatheData):
     """Packed, opaque buffers of one B-spline lathe (local frame).
 
-    Attributes:
+    Attributes (besides those of :class:`~lathe_shape.kernels.common.LatheData`):
         seg: ``mi.Float`` of ``n_seg * 8`` values (see ``_STRIDE``).
         leaf: ``mi.Float`` of ``n_leaf * 20`` values (see ``_LEAF_STRIDE``).
         nodes: ``mi.Float``, 4 values per node of the four threaded BVH
@@ -152,14 +157,10 @@ class BSplineData:
         n_nodes: opaque ``mi.UInt32``: nodes per copy.
         n_seg: opaque ``mi.UInt32`` (one element): number of segments.
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
-        cyl_rmax, cyl_zmin, cyl_zmax: opaque ``mi.Float`` padded bounding
-            cylinder of the whole curve.
+        bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
+            cylinder of the whole curve (the union of the leaf boxes).
         scale: opaque ``mi.Float``: bounding-box diagonal of the profile.
     """
-
-    def __init__(self, **kwargs) -> None:
-        for key, value in kwargs.items():
-            setattr(self, key, value)
 
 
 #: Result types (shared with the polyline kernel).
@@ -241,11 +242,6 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
 
     recs, links, n_nodes = threaded_bvh(boxes, record, lambda k, b: record(b))
 
-    def opaque(value, cls=mi.Float):
-        v = cls(value)
-        dr.make_opaque(v)
-        return v
-
     return BSplineData(
         seg=opaque(coef.reshape(n_seg, _STRIDE).ravel()),
         leaf=opaque(np.asarray(leaves).ravel()),
@@ -255,9 +251,9 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
         n_seg=opaque(n_seg, mi.UInt32),
         n_seg_host=n_seg,
         n_leaf_host=len(leaves),
-        cyl_rmax=opaque(float(boxes[:, 1].max())),
-        cyl_zmin=opaque(float(boxes[:, 2].min())),
-        cyl_zmax=opaque(float(boxes[:, 3].max())),
+        bound_r=opaque(float(boxes[:, 1].max())),
+        bound_z_lo=opaque(float(boxes[:, 2].min())),
+        bound_z_hi=opaque(float(boxes[:, 3].max())),
         scale=opaque(scale),
     )
 
@@ -379,85 +375,37 @@ def _isolate_critical(derivs: list, lo, hi) -> list:
 # Ray setup and culling
 # ---------------------------------------------------------------------------
 
-class _Ray:
-    """Ray quantities in the shifted frame (unit direction, origin near the
-    bounding cylinder); ``s`` here is a length along the unit direction."""
+class _Ray(LatheRay):
+    """The common ray set-up (kernels/common.py) for a unit direction, so that
+    ``s`` is a length, plus the ray's closest approach to the axis."""
 
-    def __init__(self, o, dh, a, b, c, s_star, r0sq, lo, hi):
-        self.o, self.dh = o, dh
-        self.a, self.b, self.c = a, b, c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
-        self.s_star, self.r0sq = s_star, r0sq  # closest approach to the axis (xy)
-        self.zc = dr.fma(dh.z, s_star, o.z)    # z* = z at the closest approach
-        self.vertical = a <= 1e-12             # parallel to the axis
+    def __init__(self, data: BSplineData, o, d, tmax, active):
+        super().__init__(data, o, d, tmax, active)
+        a, b, c = self.a, self.b, self.c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
+        horiz = a > 1e-12
+        # Closest approach to the axis (xy): s*, at distance sqrt(r0sq)
+        self.s_star = dr.select(horiz, -b / a, 0.0)
+        self.r0sq = dr.select(horiz, self.cross * self.cross / a, c)
+        self.zc = dr.fma(self.d.z, self.s_star, self.o.z)  # z* = z at the closest approach
+        self.vertical = ~horiz                # parallel to the axis
         self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
-        self.inv_dz = dr.rcp(dr.select(dh.z == 0, 1e-30, dh.z))
-        self.lo, self.hi = lo, hi              # accepted open s-interval (lo, hi)
 
-
-def _xy_terms(o, dh):
-    a = dr.fma(dh.x, dh.x, dh.y * dh.y)
-    b = dr.fma(o.x, dh.x, o.y * dh.y)
-    c = dr.fma(o.x, o.x, o.y * o.y)
-    horiz = a > 1e-12
-    s_star = dr.select(horiz, -b / a, 0.0)
-    cross = dr.fma(o.x, dh.y, -o.y * dh.x)
-    r0sq = dr.select(horiz, cross * cross / a, c)
-    return a, b, c, s_star, r0sq
-
-
-def _slab(o, dh, a, s_star, r0sq, rmax, zmin, zmax):
-    """s-interval where the ray is inside the annular box's outer cylinder
-    ``r <= rmax`` and its slab ``zmin <= z <= zmax`` (empty: lo > hi)."""
-    # z: linear in s.
-    inv_dz = dr.rcp(dh.z)
-    s1 = (zmin - o.z) * inv_dz
-    s2 = (zmax - o.z) * inv_dz
-    flat = dh.z == 0
-    inside_z = (o.z >= zmin) & (o.z <= zmax)
-    zlo = dr.select(flat, dr.select(inside_z, -dr.inf, dr.inf), dr.minimum(s1, s2))
-    zhi = dr.select(flat, dr.select(inside_z, dr.inf, -dr.inf), dr.maximum(s1, s2))
-    # r^2(s) = a (s - s*)^2 + r0^2 <= rmax^2: quadratic, symmetric about s*.
-    disc = rmax * rmax - r0sq
-    vertical = a <= 1e-12
-    h = dr.sqrt(dr.maximum(disc, 0.0) / dr.select(vertical, 1.0, a))
-    rlo = dr.select(vertical, -dr.inf, s_star - h)
-    rhi = dr.select(vertical, dr.inf, s_star + h)
-    rlo = dr.select(disc >= 0, rlo, dr.inf)
-    rhi = dr.select(disc >= 0, rhi, -dr.inf)
-    return dr.maximum(zlo, rlo), dr.minimum(zhi, rhi)
-
-
-def _setup(data: BSplineData, o, d, tmax, active):
-    """Unit direction, bounding-cylinder clip, origin shift."""
-    dn = dr.norm(d)
-    dh = d / dn
-    a, b, c, s_star, r0sq = _xy_terms(o, dh)
-    c_lo, c_hi = _slab(o, dh, a, s_star, r0sq, data.cyl_rmax, data.cyl_zmin, data.cyl_zmax)
-    s_max = tmax * dn
-    active = active & (dn > 0) & (c_lo <= c_hi) & (c_hi > 0) & (c_lo < s_max)
-    shift = dr.select(active, dr.maximum(c_lo, 0.0), 0.0)
-    o2 = mi.Point3f(dr.fma(dh.x, shift, o.x), dr.fma(dh.y, shift, o.y), dr.fma(dh.z, shift, o.z))
-    a, b, c, s_star, r0sq = _xy_terms(o2, dh)
-    ray = _Ray(o2, dh, a, b, c, s_star, r0sq, -shift, s_max - shift)
-    return ray, active, shift, dn
+    def reaches(self, lo, hi, r2):
+        """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
+        hi]``: its largest value there is at the end farther from ``s*``."""
+        e0 = lo - self.s_star
+        e1 = hi - self.s_star
+        return dr.fma(self.a, dr.maximum(e0 * e0, e1 * e1), self.r0sq) >= r2
 
 
 def _box_enter(ray: _Ray, box, best, active):
     """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
-    within (lo, best) (as ``_slab``, with the ray's reciprocals hoisted)."""
-    # z: linear in s (d_z = 0 nudged: the interval is then all or nothing).
-    s1 = (box.z - ray.o.z) * ray.inv_dz
-    s2 = (box.w - ray.o.z) * ray.inv_dz
+    within (s_lo, best)."""
     # r(s)^2 = a (s - s*)^2 + r0^2 <= rmax^2: symmetric about s*.
     disc = dr.fma(box.x, box.x, -ray.r0sq)
     h = dr.select(ray.vertical, dr.inf, dr.sqrt(dr.maximum(disc, 0.0) * ray.inv_a))
-    s0 = dr.maximum(dr.maximum(dr.minimum(s1, s2), ray.s_star - h), ray.lo)
-    s1 = dr.minimum(dr.minimum(dr.maximum(s1, s2), ray.s_star + h), best)
-    # r(s)^2 is convex: its maximum over [s0, s1] is at an endpoint.
-    e0 = s0 - ray.s_star
-    e1 = s1 - ray.s_star
-    r2max = dr.fma(ray.a, dr.maximum(e0 * e0, e1 * e1), ray.r0sq)
-    return active & (disc >= 0) & (s0 <= s1) & (r2max >= box.y)
+    return active & (disc >= 0) & common.enter_annular_box(ray, box.z, box.w, ray.s_star - h,
+                                                     ray.s_star + h, box.y, best)
 
 
 def _bezier_square(p: list) -> list:
@@ -478,7 +426,7 @@ def _hull(Rb, Zb, ray: _Ray):
     R = [Rb.x, Rb.y, Rb.z, Rb.w]
     W2 = _bezier_square(W)
     R2 = _bezier_square(R)
-    k2 = ray.dh.z * ray.dh.z
+    k2 = ray.d.z * ray.d.z
     G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
     # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull).
     mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
@@ -502,20 +450,19 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
     whose box the ray enters before ``best`` and whose Bernstein hull of
     ``F`` does not exclude a root (or a grazing contact)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
-    link = dr.gather(mi.UInt32, data.links, node, active)
-    is_leaf = (link & LEAF) != 0
+    link, is_leaf, leaf = common.bvh_link(data.links, node, active)
     enter = _box_enter(ray, box, best, active)
     m = enter & is_leaf
     cand = mi.Bool(False)  # an entered leaf that F may cross or touch
     if m:
-        base = (link & (LEAF - 1)) * (_LEAF_STRIDE // 4)
+        base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
         G, tol = _hull(Rb, Zb, ray)
         cand = m & ~_one_sign(G, tol)
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
-    nxt = dr.select(cand, node, dr.select(is_leaf | enter, node + 1, link))
+    nxt = dr.select(cand, node, common.bvh_next(node, link, is_leaf, enter))
     return cand, nxt
 
 
@@ -543,7 +490,7 @@ class _Leaf:
         W2 = _polymul(W, W)
         R2 = _polymul(self.R, self.R)
         R2[0] = R2[0] - ray.r0sq
-        k2 = ray.dh.z * ray.dh.z
+        k2 = ray.d.z * ray.d.z
         self.F = [dr.fma(ray.a, W2[k], -k2 * R2[k]) for k in range(7)]
         self.dF = _polyder(self.F)
 
@@ -552,7 +499,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_se
     """The root of ``F`` on [x0, x1], where it is monotonic (values ``f0``,
     ``f1`` at the ends), or a tangent root at an end; updates the nearest
     hit. See the module docstring for the choice of ``s``."""
-    o, dz = ray.o, ray.dh.z
+    o, dz = ray.o, ray.d.z
     tol = lf.tol
     u, found = _bracket_root(lf.F, lf.dF, x0, x1, f0, f1, _STEPS_ROOT)
     # No sign change: a tangent (double) root at the endpoint with the
@@ -589,7 +536,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_se
     ok_b = ok & ~steep & ((e2 < e1) | both)
     t = dr.fma(lf.h, u, lf.t0)
     for s, oks in ((cand_a, ok_a), (s2, ok_b)):
-        take = oks & (s > ray.lo) & (s < best_s) & dr.isfinite(s)
+        take = oks & (s > ray.s_lo) & (s < best_s) & dr.isfinite(s)
         best_s = dr.select(take, s, best_s)
         best_u = dr.select(take, t, best_u)
         best_seg = dr.select(take, lf.seg, best_seg)
@@ -649,13 +596,12 @@ def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m)
 
 @dr.syntax
 def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
-    ray, active, shift, dn = _setup(data, o, d, tmax, mi.Bool(active))
-    # Threaded BVH copy: lower child first going up, outer child first when
-    # moving towards the axis.
-    copy = dr.select(ray.dh.z >= 0, 0, 2) + dr.select(ray.b <= 0, 0, 1)
-    node = mi.UInt32(copy) * data.n_nodes   # current node
-    end = node + data.n_nodes               # one past this copy's last node
-    best_s = mi.Float(ray.hi)   # nearest accepted s so far (shifted frame)
+    dn = dr.norm(d)
+    ray = _Ray(data, o, d / dn, tmax * dn, mi.Bool(active) & (dn > 0))
+    active = ray.active
+    node = mi.UInt32(ray.first) # current node of this ray's BVH copy
+    end = ray.end               # one past this copy's last node
+    best_s = mi.Float(ray.s_max)  # nearest accepted s so far (moved frame)
     best_u = mi.Float(0.0)      # its curve parameter t
     best_seg = mi.UInt32(0)     # its segment
     hit = mi.Bool(False)        # a hit was found (ends shadow rays)
@@ -665,15 +611,15 @@ def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
         cand = mi.Bool(False)
         while active & (node < end) & ~cand:
             cand, node = _visit(data, ray, node, best_s, active & (node < end))
-        leaf = dr.gather(mi.UInt32, data.links, node, cand) & (LEAF - 1)
+        leaf = common.bvh_link(data.links, node, cand)[2]
         prev = mi.Float(best_s)
         best_s, best_u, best_seg = _solve_leaf(data, leaf, ray, best_s, best_u, best_seg, cand)
         hit |= best_s < prev
         node = dr.select(cand, node + 1, node)
-    valid = hit & (best_s < ray.hi)
+    valid = hit & (best_s < ray.s_max)
     if not shadow:
         best_s, best_u = _polish(data, ray, best_s, best_u, best_seg, valid)
-    t = dr.select(valid, (best_s + shift) / dn, dr.inf)
+    t = dr.select(valid, (best_s + ray.s_enter) / dn, dr.inf)
     return BSplineHit(t=t, seg=best_seg, u=dr.clip(best_u, 0.0, 1.0), valid=valid)
 
 
@@ -690,7 +636,7 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     base = seg * _STRIDE
     R = [dr.gather(mi.Float, data.seg, base + k, active) for k in range(4)]
     Z = [dr.gather(mi.Float, data.seg, base + 4 + k, active) for k in range(4)]
-    o, dh = ray.o, ray.dh
+    o, dh = ray.o, ray.d
     for _ in range(_STEPS_POLISH):
         Rt, dR = _polyval_d(R, t)
         Zt, dZ = _polyval_d(Z, t)
@@ -707,7 +653,7 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
         ds = -(j22 * g1 + dZ * g2) / det
         dt = -(dh.z * g2 - j21 * g1) / det
         ok = active & (dr.abs(det) > 1e-4 * scale_j) & (dr.abs(dt) < 0.01)
-        ok &= (t + dt >= -_T_PAD) & (t + dt <= 1.0 + _T_PAD) & (s + ds > ray.lo)
+        ok &= (t + dt >= -_T_PAD) & (t + dt <= 1.0 + _T_PAD) & (s + ds > ray.s_lo)
         s = dr.select(ok, s + ds, s)
         t = dr.select(ok, t + dt, t)
     return s, t

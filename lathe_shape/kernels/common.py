@@ -1,10 +1,35 @@
-"""Result types shared by the intersection kernels.
+"""The skeleton shared by the lathe intersection kernels.
 
-Both kernels report a hit as ``(t, seg, u, valid)`` and the local geometry at
-a hit as ``(n, sh_n, uv, dp_du, dp_dv)``. The classes are Dr.Jit structs
-(usable with ``dr.select``, ``dr.zeros`` and as loop state) whose field types
-come from the active Mitsuba variant, so the kernels can be imported before
-``mi.set_variant``.
+A lathe kernel (polyline: kernels/polyline.py, B-spline: kernels/bspline.py)
+intersects rays, given in the lathe's local frame (axis of revolution = +z),
+with a profile revolved about that axis. Every kind works the same way and
+only supplies its leaf test (one segment or one piece of curve) and its
+local geometry; this module holds the rest:
+
+* :class:`LatheData`: the opaque buffers every kind has (threaded BVH and
+  padded bounding cylinder), built with :func:`opaque` values so that new
+  profile data never recompiles a kernel;
+* :func:`threaded_bvh`: the stackless BVH over annular boxes in the (r, z)
+  plane, stored four times with different child orders;
+* :class:`LatheRay`: ray set-up: clip against the bounding cylinder, move
+  the origin to the entry point, the ray's radial quadratic and its BVH copy;
+* :func:`enter_annular_box`, :func:`bvh_link`, :func:`bvh_next`: one step of
+  the threaded traversal;
+* the result types :class:`LatheHit` and :class:`LatheGeometry`.
+
+Float32 precision. A ray that starts far from the lathe (a camera ray, or a
+long shadow ray) has ``|o|`` much larger than the profile, and the constant
+terms of the quadratics below (``|o_xy|^2 - R^2``) then lose most of their
+digits to cancellation. Every kernel therefore first moves the origin to the
+ray's entry into the (padded) bounding cylinder and measures ``s`` from
+there; the clip itself uses a factored discriminant that does not cancel.
+A ray with ``d_z = 0`` would make the slab bounds ``0 * inf``; ``d_z`` is
+nudged to a tiny value instead, which makes the slab all or nothing.
+
+The result classes are Dr.Jit structs (usable with ``dr.select``,
+``dr.zeros`` and as loop state) whose field types come from the active
+Mitsuba variant, so the kernels can be imported before ``mi.set_variant``.
+All Dr.Jit functions here are traceable inside an outer symbolic loop.
 """
 
 from __future__ import annotations
@@ -15,7 +40,19 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["LEAF", "LatheHit", "LatheGeometry", "threaded_bvh"]
+__all__ = [
+    "LEAF",
+    "LatheData",
+    "LatheGeometry",
+    "LatheHit",
+    "LatheRay",
+    "bvh_link",
+    "bvh_next",
+    "enter_annular_box",
+    "opaque",
+    "radial_interval",
+    "threaded_bvh",
+]
 
 #: Flag bit in a threaded-BVH link word marking a leaf (low bits: its index).
 LEAF = 0x80000000
@@ -117,3 +154,168 @@ def threaded_bvh(
     n_nodes = 2 * len(box) - 1
     assert len(records) == 4 * n_nodes
     return records, links, n_nodes
+
+
+# ---------------------------------------------------------------------------
+# Kernel data
+# ---------------------------------------------------------------------------
+
+def opaque(value, cls=None):
+    """``cls(value)`` (default ``mi.Float``) marked opaque: its values are
+    passed to kernels as parameters instead of being baked in as literals,
+    so that a kernel traced once serves every profile (no recompilation on
+    new data)."""
+    result = (mi.Float if cls is None else cls)(value)
+    dr.make_opaque(result)
+    return result
+
+
+class LatheData:
+    """Opaque Dr.Jit buffers of one lathe, for one kernel kind.
+
+    Every kind has the attributes below; each adds its own (see
+    ``PolylineData`` and ``BSplineData``). Keyword arguments become
+    attributes.
+
+    ``nodes``
+        Float buffer of per-node records of the four threaded BVH copies
+        (layout chosen by the kind).
+    ``links``
+        UInt32 buffer: the miss link of an inner node, or ``LEAF | index``
+        for a leaf.
+    ``n_nodes``
+        Opaque UInt32: nodes per copy.
+    ``bound_r, bound_z_lo, bound_z_hi``
+        Opaque Float scalars: the padded bounding cylinder that clips rays.
+    """
+
+    def __init__(self, **kwargs) -> None:
+        for key, value in kwargs.items():
+            setattr(self, key, value)
+
+
+# ---------------------------------------------------------------------------
+# Ray set-up (Dr.Jit, traced)
+# ---------------------------------------------------------------------------
+
+def radial_interval(a_xy, b_xy, c_xy, cross, rmax):
+    """Interval of ``s`` where ``r(s) <= rmax`` (empty: ``lo > hi``) for
+    ``r(s)^2 = a s^2 + 2 b s + c`` and ``cross = o_x d_y - o_y d_x``.
+
+    The discriminant ``b^2 - a (c - rmax^2) = a rmax^2 - cross^2`` is
+    evaluated factored (no cancellation for far origins) and the roots in
+    the stable form ``q = -(b + sign(b) sqrt(disc))``, ``s = q / a, c' / q``.
+    """
+    sa = dr.sqrt(a_xy)
+    ac = dr.abs(cross)
+    disc = (sa * rmax - ac) * (sa * rmax + ac)
+    q = -(b_xy + dr.copysign(dr.sqrt(dr.maximum(disc, 0)), b_xy))
+    s1 = q / a_xy
+    s2 = (c_xy - rmax * rmax) / q
+    lo = dr.minimum(s1, s2)
+    hi = dr.maximum(s1, s2)
+    # Rays parallel to the axis: inside for all s or never
+    inside = c_xy <= rmax * rmax
+    lo = dr.select(a_xy == 0, dr.select(inside, -dr.inf, dr.inf), lo)
+    hi = dr.select(a_xy == 0, dr.select(inside, dr.inf, -dr.inf), hi)
+    miss = (a_xy != 0) & (disc < 0)
+    return dr.select(miss, dr.inf, lo), dr.select(miss, -dr.inf, hi)
+
+
+class LatheRay:
+    """Per-ray constants of one traversal, origin moved into place.
+
+    The ray ``o + t d`` (local frame, any ``|d| > 0``) is clipped against the
+    padded bounding cylinder of ``data``; its origin is moved to the entry
+    point ``t = s_enter`` (see the module docstring) and from then on ``s =
+    t - s_enter`` is the ray parameter, in units of ``d``. Attributes:
+
+    ``o, d``: moved origin and direction; ``active``: lanes that meet the
+    cylinder before ``tmax``; ``s_enter``; ``s_lo = -s_enter`` (hits need
+    ``t > 0``), ``s_max = tmax - s_enter`` and ``s_hi`` (also before the
+    cylinder exit); ``a, b, c``: ``r(s)^2 = a s^2 + 2 b s + c``; ``cross``:
+    ``o_x d_y - o_y d_x``; ``inv_dz``: ``1 / d_z`` (nudged); ``first, end``:
+    the node range of this ray's BVH copy.
+    """
+
+    def __init__(self, data: LatheData, o: mi.Point3f, d: mi.Vector3f,
+                 tmax: mi.Float, active: mi.Bool) -> None:
+        a_xy = dr.fma(d.x, d.x, d.y * d.y)
+        # z slab of the bounding cylinder (d_z = 0 nudged to avoid 0 * inf)
+        dz = dr.select(d.z == 0, 1e-30, d.z)
+        inv_dz = dr.rcp(dz)
+        zl = (data.bound_z_lo - o.z) * inv_dz
+        zh = (data.bound_z_hi - o.z) * inv_dz
+        # Radial interval of the (far) original origin: r(s) <= bound_r
+        r_lo, r_hi = radial_interval(a_xy, dr.fma(o.x, d.x, o.y * d.y),
+                                     dr.fma(o.x, o.x, o.y * o.y),
+                                     dr.fma(o.x, d.y, -o.y * d.x), data.bound_r)
+        lo = dr.maximum(dr.minimum(zl, zh), r_lo)
+        hi = dr.minimum(dr.maximum(zl, zh), r_hi)
+
+        # Move the origin to the cylinder entry
+        s_enter = dr.maximum(lo, 0)
+        self.active = active & (lo <= hi) & (hi > 0) & (s_enter < tmax)
+        s_enter = dr.select(self.active, s_enter, 0)
+        self.s_enter = s_enter
+        self.o = mi.Point3f(dr.fma(d.x, s_enter, o.x),
+                            dr.fma(d.y, s_enter, o.y),
+                            dr.fma(d.z, s_enter, o.z))
+        self.d = mi.Vector3f(d)
+        self.s_lo = -s_enter
+        self.s_max = tmax - s_enter
+        self.s_hi = dr.minimum(self.s_max, hi - s_enter)
+
+        # The radial quadratic in the moved frame
+        ox, oy = self.o.x, self.o.y
+        self.a = a_xy
+        self.b = dr.fma(ox, d.x, oy * d.y)
+        self.c = dr.fma(ox, ox, oy * oy)
+        self.cross = dr.fma(ox, d.y, -oy * d.x)
+        self.inv_dz = inv_dz
+        # BVH copy (see threaded_bvh): lower child first when going up,
+        # outer child first when moving towards the axis
+        copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b <= 0, 0, 1)
+        self.first = mi.UInt32(copy) * data.n_nodes
+        self.end = self.first + data.n_nodes
+
+    def reaches(self, lo: mi.Float, hi: mi.Float, r2: mi.Float) -> mi.Bool:
+        """Whether ``r(s)^2`` reaches ``r2`` somewhere on ``[lo, hi]``: it is
+        convex, so its largest value there is at one of the ends. (Two
+        comparisons rather than one of the larger value: that form is the
+        faster one in the polyline kernel's LLVM code.)"""
+        r2_lo = dr.fma(dr.fma(self.a, lo, 2 * self.b), lo, self.c)
+        r2_hi = dr.fma(dr.fma(self.a, hi, 2 * self.b), hi, self.c)
+        return (r2_lo >= r2) | (r2_hi >= r2)
+
+
+# ---------------------------------------------------------------------------
+# One traversal step (Dr.Jit, traced)
+# ---------------------------------------------------------------------------
+
+def enter_annular_box(ray: LatheRay, zmin, zmax, r_lo, r_hi, rmin2, s_best):
+    """Whether the ray meets the annular box ``[rmin, rmax] x [zmin, zmax]``
+    at some ``s`` in ``(ray.s_lo, s_best)``.
+
+    ``(r_lo, r_hi)`` is the kind's interval where ``r(s) <= rmax``; ``rmin2``
+    is ``rmin^2``. The box is entered when the largest ``r(s)^2`` over the
+    part of the ray within the slab and that interval reaches ``rmin^2``.
+    """
+    zl = (zmin - ray.o.z) * ray.inv_dz
+    zh = (zmax - ray.o.z) * ray.inv_dz
+    lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), r_lo), ray.s_lo)
+    hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), r_hi), s_best)
+    return (lo <= hi) & ray.reaches(lo, hi, rmin2)
+
+
+def bvh_link(links: mi.UInt32, node: mi.UInt32, active: mi.Bool):
+    """``(link, is_leaf, index)`` of a node of a threaded BVH: its link
+    word, whether it is a leaf and, for a leaf, the leaf's index."""
+    link = dr.gather(mi.UInt32, links, node, active)
+    return link, (link & LEAF) != 0, link & (LEAF - 1)
+
+
+def bvh_next(node: mi.UInt32, link: mi.UInt32, is_leaf: mi.Bool, entered: mi.Bool) -> mi.UInt32:
+    """The next node in pre-order: the first child of an entered inner node
+    (or the node after a leaf), else the miss link past the subtree."""
+    return dr.select(is_leaf | entered, node + 1, link)

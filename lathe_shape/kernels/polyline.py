@@ -5,7 +5,7 @@ local +z axis and a profile point ``(r, z)`` lies at distance ``r >= 0`` from
 it. The profile is a list of segments ``(r0, z0) -> (r1, z1)`` oriented
 clockwise in the (r right, z up) plane, so that the solid's interior is on the
 right of every segment and the outward normal is the left-hand normal
-``(-(z1 - z0), r1 - r0) / L`` (``/work/shared/docs/method.md``).
+``(-(z1 - z0), r1 - r0) / L`` (docs/method.md, eqs. 8-9).
 
 Every segment is handled through one formula. Writing its supporting line as
 ``n_r r + n_z z = c`` (``(n_r, n_z)`` the unit outward normal), the swept
@@ -18,25 +18,25 @@ which is the paper's cone frustum ``x^2 + y^2 = (A z + B)^2`` (eq. 1) scaled by
 ``z = z0`` (eqs. 4-5, a double root) when ``n_r = 0``. Substituting the ray
 gives one quadratic (eqs. 2-3) for frusta, cylinders and annuli alike.
 
-Culling uses a small bounding volume hierarchy over the segments in the
-(r, z) plane. A node is an annular box ``[rmin, rmax] x [zmin, zmax]``; the
-ray enters it where ``z(s)`` lies in the slab and ``r(s) <= rmax`` (the same
-quadratic with the cylinder ``r = rmax``), and since ``r(s)^2`` is convex in
-``s`` the largest radius over that interval is at one of its ends (the
-``rmin`` test). The tree is stored four times as a *threaded* array (pre-order
-with miss links) so that traversal needs no stack; the four copies differ
-only in the child order (lower or upper child first for a z split, outer or
-inner child first for an r split), and every ray picks the copy matching the
-sign of its ``d_z`` and of its radial velocity, which visits nearby nodes
-first and lets the nearest-hit search shrink its interval early.
+The ray set-up, the threaded BVH over annular boxes in the (r, z) plane and
+its traversal step are those of every lathe kernel (kernels/common.py); this
+module supplies the segment (leaf) test and the local geometry. An inner
+node's box test reuses the leaf's quadratic: with ``(n_r, n_z, c) = (1, 0,
+rmax)`` it is the cylinder ``r = rmax``, whose roots bound the box's radial
+interval, so one quadratic per step serves both kinds of node.
 
-Precision (``/work/shared/docs/traps.md``): the ray origin is first moved to
-its entry into the profile's bounding cylinder, roots use the stable form
-``q = -(b + sign(b) sqrt(disc))``, the discriminant and constant term are
-evaluated in factored forms that do not cancel, and a hit is accepted on a
-segment when its profile position lies within an absolute tolerance (scaled
-to the profile size) of the segment, so that rays aimed exactly at joints
-still find a surface.
+Float32 precision. Beyond moving the origin to the bounding cylinder (see
+kernels/common.py), three things keep the quadratic accurate: its roots are
+taken in the stable form ``q = -(b + sign(b) sqrt(disc))``, ``s = q / a,
+c / q``, which avoids subtracting two nearly equal numbers; the discriminant
+and the constant term are evaluated as products of differences
+(``(u - v)(u + v)``) rather than as differences of squares, which would
+cancel for rays that graze a segment or start near it; and a root is accepted
+on a segment when its profile position lies within an absolute tolerance
+(scaled to the profile size) of the segment, so that a ray aimed exactly at
+a joint between two segments, where float32 rounding may place the hit just
+outside both, still finds a surface. Near-tangent rays (within that
+tolerance, e.g. through a cone apex on the axis) keep their double root.
 
 The functions need an active JIT Mitsuba variant (``llvm_*`` or ``cuda_*``)
 when called; importing the module needs none.
@@ -48,7 +48,29 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .common import LEAF, LatheGeometry, LatheHit, threaded_bvh
+from ..profiles.polyline import Profile
+from .common import (
+    LatheData,
+    LatheGeometry,
+    LatheHit,
+    LatheRay,
+    bvh_link,
+    bvh_next,
+    enter_annular_box,
+    opaque,
+    threaded_bvh,
+)
+
+__all__ = [
+    "PolylineData",
+    "PolylineHit",
+    "PolylineGeometry",
+    "build_polyline_data",
+    "profile_polyline_data",
+    "intersect_polyline",
+    "occluded_polyline",
+    "polyline_geometry",
+]
 
 #: Joint tolerance relative to the profile size (max of r extent, z extent).
 TOL_REL = 1e-5
@@ -57,24 +79,18 @@ TOL_REL = 1e-5
 #: joint tolerance (boxes must contain every hit that a segment accepts).
 _BOX_PAD = 8.0
 
-#: Floats per node record (two Vector4f gathers).
-_REC = 8
-
-
-class PolylineData:
+class PolylineData(LatheData):
     """Opaque Dr.Jit buffers describing one polyline profile.
 
-    Built by :func:`build_polyline_data`. Attributes:
+    Built by :func:`build_polyline_data`. Besides the attributes of
+    :class:`~lathe_shape.kernels.common.LatheData` (``links``, ``n_nodes``
+    and the padded bounding cylinder ``bound_r``, ``bound_z_lo``,
+    ``bound_z_hi``):
 
     ``nodes``
         Float buffer, 8 floats per node of the four threaded BVH copies.
         Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
         ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
-    ``links``
-        UInt32 buffer: the miss link of an inner node, or
-        ``LEAF | segment index`` for a leaf.
-    ``n_nodes``
-        Opaque UInt32: nodes per copy.
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
         segment (geometric normal and profile tangent scaled for ``dp_dv``).
@@ -82,10 +98,6 @@ class PolylineData:
         Float buffer, ``(nr0, nz0, nr1, nz1)`` per segment (shading normals).
     ``seg_arc``
         Float buffer, ``(arc start / total, L / total)`` per segment.
-    ``r_max, z_min, z_max``
-        Opaque Float scalars: the profile's bounding cylinder (unpadded).
-    ``r_bound, z_lo, z_hi``
-        Opaque Float scalars: the padded bounding cylinder used for culling.
     ``tol``
         Opaque Float scalar: the absolute joint tolerance.
     ``total_length``
@@ -93,10 +105,6 @@ class PolylineData:
     ``n_seg``
         Python int: number of segments.
     """
-
-    def __init__(self, **kwargs) -> None:
-        for key, value in kwargs.items():
-            setattr(self, key, value)
 
 
 #: Result types (shared with the B-spline kernel).
@@ -108,49 +116,62 @@ PolylineGeometry = LatheGeometry
 # Building the data (numpy, once per profile)
 # ---------------------------------------------------------------------------
 
-def build_polyline_data(r0, z0, r1, z1, nr0, nz0, nr1, nz1) -> PolylineData:
+def _points(name: str, value, m: int | None) -> np.ndarray:
+    """``value`` as a float64 (m, 2) array; a ValueError names ``name``."""
+    a = np.asarray(value, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 2 or (m is not None and len(a) != m):
+        rows = "m" if m is None else str(m)
+        raise ValueError(f"build_polyline_data(): '{name}' must have shape ({rows}, 2), "
+                         f"got {a.shape}")
+    return a
+
+
+def build_polyline_data(start, end, normal_start=None, normal_end=None) -> PolylineData:
     """Pack a polyline profile into opaque Dr.Jit buffers.
 
-    Parameters are numpy float64 arrays of length ``n_seg``: segment end
-    points ``(r0, z0) -> (r1, z1)`` (clockwise profile, interior on the right,
-    closed, no segment on the axis) and unit shading normals ``(nr0, nz0)``
-    at the start and ``(nr1, nz1)`` at the end of every segment.
+    ``start`` and ``end`` are ``(m, 2)`` arrays of the segments' ``(r, z)``
+    end points (clockwise profile, interior on the right, closed, no segment
+    on the axis). ``normal_start`` and ``normal_end`` are the ``(m, 2)``
+    unit shading normals ``(n_r, n_z)`` at the start and at the end of every
+    segment (eq. 10); ``None`` means the segment's own geometric normal
+    (eqs. 8-9: flat shading).
     """
-    r0, z0, r1, z1, nr0, nz0, nr1, nz1 = (
-        np.asarray(a, dtype=np.float64).ravel()
-        for a in (r0, z0, r1, z1, nr0, nz0, nr1, nz1))
-    n_seg = len(r0)
-    if n_seg == 0:
-        raise ValueError('build_polyline_data(): empty profile')
+    p0 = _points("start", start, None)
+    p1 = _points("end", end, len(p0))
+    if len(p0) == 0:
+        raise ValueError("build_polyline_data(): 'start' is empty (a profile needs segments)")
+    r0, z0 = p0.T
+    r1, z1 = p1.T
     if np.any(r0 < 0) or np.any(r1 < 0):
-        raise ValueError('build_polyline_data(): negative radius')
+        raise ValueError("build_polyline_data(): negative radius in 'start' or 'end'")
     dr_ = r1 - r0
     dz_ = z1 - z0
     length = np.hypot(dr_, dz_)
     if np.any(length <= 0):
-        raise ValueError('build_polyline_data(): zero-length segment')
+        k = int(np.argmin(length))
+        raise ValueError(f"build_polyline_data(): segment {k} has zero length "
+                         f"('start' equals 'end' at {p0[k].tolist()})")
+    # Supporting line n_r r + n_z z = c with the outward (left-hand) normal
+    n_r = -dz_ / length
+    n_z = dr_ / length
+    flat = np.stack([n_r, n_z], axis=1)
+    sh0 = flat if normal_start is None else _points("normal_start", normal_start, len(p0))
+    sh1 = flat if normal_end is None else _points("normal_end", normal_end, len(p0))
 
     r_max = float(max(r0.max(), r1.max()))
     z_min = float(min(z0.min(), z1.min()))
     z_max = float(max(z0.max(), z1.max()))
-    scale = max(r_max, z_max - z_min)
-    tol = TOL_REL * scale
+    tol = TOL_REL * max(r_max, z_max - z_min)
     pad = _BOX_PAD * tol
-
-    # Supporting line n_r r + n_z z = c with the outward (left-hand) normal
-    n_r = -dz_ / length
-    n_z = dr_ / length
     c = n_r * r0 + n_z * z0
     leaf_rec = np.stack([n_r, n_z, c, r0, z0, dr_ / length**2,
                          dz_ / length**2, tol / length], axis=1)
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
-    hi_r = np.maximum(r0, r1) + pad
-    lo_z = np.minimum(z0, z1) - pad
-    hi_z = np.maximum(z0, z1) + pad
     recs, links, n_nodes = threaded_bvh(
-        np.stack([lo_r, hi_r, lo_z, hi_z], axis=1),
+        np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
+                  np.maximum(z0, z1) + pad], axis=1),
         # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
         lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3], 0.0, 0.0],
         lambda k, b: leaf_rec[k],
@@ -158,111 +179,52 @@ def build_polyline_data(r0, z0, r1, z1, nr0, nz0, nr1, nz1) -> PolylineData:
 
     arc = np.concatenate([[0.0], np.cumsum(length)])
     total = float(arc[-1])
-    seg_geo = np.stack([n_r, n_z, dr_ * total / length,
-                        dz_ * total / length], axis=1)
-    seg_sh = np.stack([nr0, nz0, nr1, nz1], axis=1)
+    seg_geo = np.stack([n_r, n_z, dr_ * total / length, dz_ * total / length], axis=1)
+    seg_sh = np.concatenate([sh0, sh1], axis=1)
     seg_arc = np.stack([arc[:-1] / total, length / total], axis=1)
 
-    def opaque(value):
-        dr.make_opaque(value)
-        return value
+    def buffer(a):
+        return opaque(np.asarray(a, dtype=np.float32).ravel())
 
     return PolylineData(
-        nodes=opaque(mi.Float(np.asarray(recs, dtype=np.float32).ravel())),
-        links=opaque(mi.UInt32(np.asarray(links, dtype=np.uint32))),
-        n_nodes=opaque(mi.UInt32(n_nodes)),
-        seg_geo=opaque(mi.Float(seg_geo.astype(np.float32).ravel())),
-        seg_sh=opaque(mi.Float(seg_sh.astype(np.float32).ravel())),
-        seg_arc=opaque(mi.Float(seg_arc.astype(np.float32).ravel())),
-        r_max=opaque(mi.Float(r_max)),
-        z_min=opaque(mi.Float(z_min)),
-        z_max=opaque(mi.Float(z_max)),
-        r_bound=opaque(mi.Float(r_max + 2 * pad)),
-        z_lo=opaque(mi.Float(z_min - 2 * pad)),
-        z_hi=opaque(mi.Float(z_max + 2 * pad)),
-        tol=opaque(mi.Float(tol)),
+        nodes=buffer(recs),
+        links=opaque(np.asarray(links, dtype=np.uint32), mi.UInt32),
+        n_nodes=opaque(n_nodes, mi.UInt32),
+        seg_geo=buffer(seg_geo),
+        seg_sh=buffer(seg_sh),
+        seg_arc=buffer(seg_arc),
+        bound_r=opaque(r_max + 2 * pad),
+        bound_z_lo=opaque(z_min - 2 * pad),
+        bound_z_hi=opaque(z_max + 2 * pad),
+        tol=opaque(tol),
         total_length=total,
-        n_seg=n_seg,
+        n_seg=len(p0),
     )
 
 
+def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData:
+    """:func:`build_polyline_data` of a validated profile: its interpolated
+    shading normals when ``smooth``, else flat (geometric) normals."""
+    start, end = profile.segment_points()
+    if smooth:
+        return build_polyline_data(start, end, profile.normal_start, profile.normal_end)
+    return build_polyline_data(start, end)
+
+
 # ---------------------------------------------------------------------------
-# Ray set-up and one traversal step (Dr.Jit, traced)
+# One traversal step (Dr.Jit, traced)
 # ---------------------------------------------------------------------------
 
-class _Ray:
-    """Per-ray constants of a traversal, with the origin moved into place."""
+class _Ray(LatheRay):
+    """The common ray set-up plus the per-ray constants of the segment test."""
 
     def __init__(self, data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
                  tmax: mi.Float, active: mi.Bool) -> None:
-        a_xy = dr.fma(d.x, d.x, d.y * d.y)
-        # z slab of the bounding cylinder (d_z = 0 nudged to avoid 0 * inf)
-        dz = dr.select(d.z == 0, 1e-30, d.z)
-        inv_dz = dr.rcp(dz)
-        zl = (data.z_lo - o.z) * inv_dz
-        zh = (data.z_hi - o.z) * inv_dz
-        # Radial interval of the (far) original origin: r(s) <= r_bound
-        b_xy = dr.fma(o.x, d.x, o.y * d.y)
-        c_xy = dr.fma(o.x, o.x, o.y * o.y)
-        cross = dr.fma(o.x, d.y, -o.y * d.x)
-        r_lo, r_hi = _radial_interval(a_xy, b_xy, c_xy, cross, data.r_bound)
-        lo = dr.maximum(dr.minimum(zl, zh), r_lo)
-        hi = dr.minimum(dr.maximum(zl, zh), r_hi)
-
-        # Move the origin to the bounding cylinder entry (traps.md: a far
-        # origin cancels catastrophically in the quadratic's constant term)
-        s_enter = dr.maximum(lo, 0)
-        self.active = active & (lo <= hi) & (hi > 0) & (s_enter < tmax)
-        s_enter = dr.select(self.active, s_enter, 0)
-        self.s_enter = s_enter
-        self.o = mi.Point3f(dr.fma(d.x, s_enter, o.x),
-                            dr.fma(d.y, s_enter, o.y),
-                            dr.fma(d.z, s_enter, o.z))
-        self.d = mi.Vector3f(d)
-        # Hits need t = s_enter + s in (0, tmax); the padded cylinder also
-        # bounds s from above (exit point)
-        self.s_lo = -s_enter
-        self.s_hi = dr.minimum(tmax - s_enter, hi - s_enter)
-        self.tmax = tmax
-
-        # Quadratic pieces in the moved frame: r(s)^2 = a s^2 + 2 b s + c
-        ox, oy = self.o.x, self.o.y
-        self.a_xy = a_xy
-        self.b_xy = dr.fma(ox, d.x, oy * d.y)
-        self.c_xy = dr.fma(ox, ox, oy * oy)
-        self.r_o = dr.sqrt(self.c_xy)
-        self.cross = dr.fma(ox, d.y, -oy * d.x)
-        self.inv_dz = inv_dz
-        self.parallel = a_xy == 0
+        super().__init__(data, o, d, tmax, active)
+        self.r_o = dr.sqrt(self.c)   # distance of the moved origin from the axis
+        self.parallel = self.a == 0  # parallel to the axis
         # Tolerance on |w| - |n_r cross| (units of length times |d|)
         self.tol_d = data.tol * dr.norm(d)
-        # Traversal copy: lower child first when going up, outer child first
-        # when moving towards the axis
-        copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b_xy <= 0, 0, 1)
-        self.first = mi.UInt32(copy) * data.n_nodes
-        self.end = self.first + data.n_nodes
-
-
-def _radial_interval(a_xy, b_xy, c_xy, cross, rmax):
-    """Interval of ``s`` where ``r(s) <= rmax`` (empty: ``lo > hi``).
-
-    ``a s^2 + 2 b s + c - rmax^2 <= 0``; the discriminant
-    ``b^2 - a (c - rmax^2) = a rmax^2 - cross^2`` is evaluated factored.
-    """
-    sa = dr.sqrt(a_xy)
-    ac = dr.abs(cross)
-    disc = (sa * rmax - ac) * (sa * rmax + ac)
-    q = -(b_xy + dr.copysign(dr.sqrt(dr.maximum(disc, 0)), b_xy))
-    s1 = q / a_xy
-    s2 = (c_xy - rmax * rmax) / q
-    lo = dr.minimum(s1, s2)
-    hi = dr.maximum(s1, s2)
-    # Rays parallel to the axis: inside for all s or never
-    inside = c_xy <= rmax * rmax
-    lo = dr.select(a_xy == 0, dr.select(inside, -dr.inf, dr.inf), lo)
-    hi = dr.select(a_xy == 0, dr.select(inside, dr.inf, -dr.inf), hi)
-    miss = (a_xy != 0) & (disc < 0)
-    return dr.select(miss, dr.inf, lo), dr.select(miss, -dr.inf, hi)
 
 
 def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
@@ -274,8 +236,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     """
     rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
     rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
-    link = dr.gather(mi.UInt32, data.links, node, active)
-    is_leaf = (link & LEAF) != 0
+    link, is_leaf, seg = bvh_link(data.links, node, active)
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     o, d = ray.o, ray.d
 
@@ -284,8 +245,8 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     nr2 = n_r * n_r
     h0 = dr.fma(-n_z, o.z, c)
     h1 = -n_z * d.z
-    qa = dr.fma(nr2, ray.a_xy, -h1 * h1)
-    qb = dr.fma(nr2, ray.b_xy, -h0 * h1)
+    qa = dr.fma(nr2, ray.a, -h1 * h1)
+    qb = dr.fma(nr2, ray.b, -h0 * h1)
     qc = (n_r * ray.r_o - h0) * (n_r * ray.r_o + h0)
     # qb^2 - qa qc = n_r^2 (|h0 d_xy - h1 o_xy|^2 - n_r^2 cross^2), factored
     wx = dr.fma(h0, d.x, -h1 * o.x)
@@ -293,32 +254,33 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     wl = dr.sqrt(dr.fma(wx, wx, wy * wy))
     cr = dr.abs(n_r * ray.cross)
     disc = (wl - cr) * (wl + cr)
-    # Near-tangent rays (within the joint tolerance, e.g. through a cone apex
-    # on the axis, where the roots are double) keep their double root
     has_root = wl - cr >= -ray.tol_d
     root = dr.abs(n_r) * dr.sqrt(dr.maximum(disc, 0))
-    # Stable roots: q = -(b + sign(b) sqrt(disc)), s = q / a and c / q
     q = -(qb + dr.copysign(root, qb))
     s1 = q / qa
     s2 = qc / q
 
-    # --- Inner node: annular box [rmin, rmax] x [zmin, zmax]
-    zl = (rec1.x - o.z) * ray.inv_dz
-    zh = (rec1.y - o.z) * ray.inv_dz
-    inside = ray.c_xy <= c * c
+    # Inner node: the roots bound the radial interval of the box
+    inside = ray.c <= c * c
     r_lo = dr.select(ray.parallel, dr.select(inside, -dr.inf, dr.inf),
                      dr.select(has_root, dr.minimum(s1, s2), dr.inf))
     r_hi = dr.select(ray.parallel, dr.inf, dr.maximum(s1, s2))
-    lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), r_lo), ray.s_lo)
-    hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), r_hi), s_best)
-    # r(s)^2 is convex: its maximum over [lo, hi] is at an end point
-    r2_lo = dr.fma(dr.fma(ray.a_xy, lo, 2 * ray.b_xy), lo, ray.c_xy)
-    r2_hi = dr.fma(dr.fma(ray.a_xy, hi, 2 * ray.b_xy), hi, ray.c_xy)
-    box_hit = (lo <= hi) & ((r2_lo >= rec0.w) | (r2_hi >= rec0.w))
+    box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
-    # --- Leaf: accept a root whose point projects into the segment
+    # Leaf: the nearer root whose point projects into the segment
+    s_hit, u_hit, ok = _segment_hit(data, ray, rec0, rec1, s1, s2, has_root, s_best)
+    hit = active & is_leaf & ok
+    return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
+
+
+def _segment_hit(data: PolylineData, ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
+    """The nearer of the roots ``s1``, ``s2`` that lies on the segment of the
+    leaf record ``(rec0, rec1)``: ``(s, u, found)``, ``u`` the fraction
+    along the segment."""
+    n_r, n_z, c = rec0.x, rec0.y, rec0.z
     r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
-    tol_n = data.tol * nr2
+    tol_n = data.tol * n_r * n_r
+    o, d = ray.o, ray.d
 
     def accept(s):
         px = dr.fma(d.x, s, o.x)
@@ -335,12 +297,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     ok1, u1 = accept(s1)
     ok2, u2 = accept(s2)
     take2 = ok2 & (~ok1 | (s2 < s1))
-    s_hit = dr.select(take2, s2, s1)
-    u_hit = dr.select(take2, u2, u1)
-    hit = active & is_leaf & (ok1 | ok2)
-
-    next_node = dr.select(~is_leaf & ~box_hit, link, node + 1)
-    return next_node, s_hit, u_hit, link & ~mi.UInt32(LEAF), hit
+    return dr.select(take2, s2, s1), dr.select(take2, u2, u1), ok1 | ok2
 
 
 # ---------------------------------------------------------------------------
@@ -413,7 +370,7 @@ def polyline_geometry(data: PolylineData, p: mi.Point3f, seg: mi.UInt32,
     geo = dr.gather(mi.Vector4f, data.seg_geo, seg)
     arc = dr.gather(mi.Vector2f, data.seg_arc, seg)
 
-    # Azimuth of the hit point (any azimuth on the axis, traps.md)
+    # Azimuth of the hit point (on the axis any azimuth will do: take phi = 0)
     r = dr.sqrt(dr.fma(p.x, p.x, p.y * p.y))
     on_axis = r == 0
     inv_r = dr.select(on_axis, 0, dr.rcp(r))

@@ -1,15 +1,40 @@
-"""Float64 numpy reference for ray vs polyline lathe (brute force).
+"""Float64 numpy references and test data for the lathe kernels.
 
-Independent of the kernel: every segment is intersected in the paper's own
-form (method.md eqs. 1-7): a cone frustum / cylinder
-``x^2 + y^2 = (A z + B)^2`` restricted to its z range with ``A z + B >= 0``,
-or a flat annulus ``z = z0``, ``min(r)^2 <= x^2 + y^2 <= max(r)^2``. The
-nearest hit with ``t > t_min`` over all segments wins.
+Polyline lathes, brute force and independent of the kernel: every segment is
+intersected in the paper's own form (docs/method.md eqs. 1-7): a cone
+frustum / cylinder ``x^2 + y^2 = (A z + B)^2`` restricted to its z range with
+``A z + B >= 0``, or a flat annulus ``z = z0``, ``min(r)^2 <= x^2 + y^2 <=
+max(r)^2``. The nearest hit with ``t > t_min`` over all segments wins. Test
+profiles are ``(r0, z0, r1, z1)`` tuples of segment arrays.
+
+B-spline lathes: the test curves (:data:`BSPLINE_CURVES`) and the ray sets
+around them (:func:`bspline_rays`) shared by the tests and the scripts.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from ..profiles import bspline as bs
+
+#: B-spline test curves (control points): a glass-wall ring (closed periodic
+#: B-spline: thick base, thin wall, rim), an egg / vase (open B-spline, both
+#: ends on the axis) and a 12-segment closed glass profile.
+BSPLINE_CURVES = {
+    "ring": np.array([[1.0, 0.0], [1.2, 0.0], [1.2, 1.5], [1.1, 2.0], [1.0, 1.5],
+                      [1.0, 0.2], [1.0, 0.0]]),
+    "egg": np.array([[0.0, 0.0], [0.6, 0.0], [1.0, 0.6], [0.9, 1.5], [0.4, 2.0], [0.0, 2.1]]),
+    "glass12": np.array([[0.0 + 0.3, 0.0], [0.9, 0.0], [1.0, 0.15], [0.5, 0.3], [0.3, 0.8],
+                         [0.8, 1.4], [1.1, 2.4], [1.0, 2.5], [0.9, 2.4], [0.6, 1.5],
+                         [0.15, 1.0], [0.2, 0.2], [0.3, 0.0]]),
+}
+
+#: Control points of the 12-segment spline glass of the benchmarks (open
+#: form: both ends on the axis, ends tripled by the B-spline rules).
+SPLINE_GLASS = np.array([
+    (0, 0), (3.5, 0), (0.3, 0.3), (0.35, 4.5), (0.5, 7.2), (4.8, 8.8),
+    (4.0, 18.4), (3.78, 18.4), (4.45, 9.4), (0.9, 7.7), (0, 7.6),
+], dtype=float)
 
 
 def intersect_reference(r0, z0, r1, z1, o, d, t_min=0.0):
@@ -155,6 +180,13 @@ def test_profiles(rng):
             ('cone', cone_profile())]
 
 
+def segment_points(prof):
+    """``(start, end)``, each ``(m, 2)``: the segments of a test profile in
+    the form of :func:`lathe_shape.kernels.polyline.build_polyline_data`."""
+    r0, z0, r1, z1 = prof
+    return np.stack([r0, z0], axis=1), np.stack([r1, z1], axis=1)
+
+
 def bounds(prof):
     """``(r_max, z_min, z_max, scale)`` of a profile."""
     r0, z0, r1, z1 = prof
@@ -238,62 +270,48 @@ def inside_profile(prof, p):
     return (np.sum(straddle & (rc > pr), axis=1) % 2) == 1
 
 
-def crossing_leaks(intersect, prof, o, d, off_rel=1e-4, max_hits=64):
-    """Follow rays through all their hits and flag leaks.
+def bspline_curve(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(segment controls, power coefficients)`` of the test curve ``name``
+    (a key of :data:`BSPLINE_CURVES`), oriented clockwise."""
+    seg = bs.bspline_segments(bs.orient_clockwise(BSPLINE_CURVES[name]))
+    return seg, bs.power_coefficients(seg)
 
-    ``intersect(o, d, active) -> (t, valid, n)`` is the kernel under test
-    (numpy in and out, ``n`` the geometric normal at the hit). After each
-    hit the ray restarts from the hit point moved ``off_rel * scale`` along
-    the normal to the far side (as ``spawn_ray`` does) and as much along the
-    ray (so that rays through a corner leave it). Between two
-    consecutive hits (a *free segment*) the ray must stay on one side of the
-    surface: the inside test (float64, exact) at 1/4, 1/2 and 3/4 of every
-    free segment must agree, the segment before the first hit must match the
-    state of ``o``, and the segment after the last hit must be outside. A ray
-    breaking one of these crossed the surface without a reported hit: a leak.
-    Sampling inside the free segments (not right at the hits) keeps the
-    float32 position noise of grazing hits from being counted.
 
-    Returns ``(leak, n_hits)`` per ray.
-    """
-    r_max, z_min, z_max, scale = bounds(prof)
-    centre = np.array([0.0, 0.0, 0.5 * (z_min + z_max)])
-    radius = 2.0 * scale
-    o = np.asarray(o, dtype=np.float64).copy()
-    d = np.asarray(d, dtype=np.float64)
-    dn2 = np.sum(d * d, axis=1)
-    off = off_rel * scale
-
-    def t_exit(orig):
-        # Ray parameter where the ray leaves the bounding sphere
-        oc = orig - centre
-        b = np.sum(oc * d, axis=1)
-        c = np.sum(oc * oc, axis=1) - radius**2
-        disc = np.maximum(b * b - dn2 * c, 0)
-        return np.maximum((-b + np.sqrt(disc)) / dn2, 0)
-
-    start_inside = inside_profile(prof, o)
-    leak = np.zeros(len(o), dtype=bool)
-    n_hits = np.zeros(len(o), dtype=np.int64)
-    active = np.ones(len(o), dtype=bool)
-    for k in range(max_hits):
-        t, valid, n = intersect(o, d, active)
-        valid = valid & active
-        t_end = np.where(valid, t, t_exit(o))
-        states = [inside_profile(prof, o + (f * t_end)[:, None] * d)
-                  for f in (0.25, 0.5, 0.75)]
-        mixed = (states[0] != states[1]) | (states[1] != states[2])
-        leak |= active & mixed
-        if k == 0:
-            leak |= active & (states[1] != start_inside)
-        # After the last hit the ray must be outside
-        leak |= active & ~valid & states[1]
-        n_hits += valid
-        side = np.where(np.sum(n * d, axis=1) >= 0, 1.0, -1.0)
-        t_off = np.where(valid, t + off / np.sqrt(dn2), 0)
-        p = o + t_off[:, None] * d + (side * off)[:, None] * n
-        o = np.where(valid[:, None], p, o)
-        active = valid
-        if not active.any():
-            break
-    return leak, n_hits
+def bspline_rays(kind: str, seg: np.ndarray, rng: np.random.Generator, n: int):
+    """``n`` rays ``(origin, direction)`` of one kind around the curve ``seg``:
+    ``outside`` (aimed near the surface from 6 units away, non-unit
+    directions), ``inside`` (from the bounding box), ``horizontal``,
+    ``near_horizontal`` or ``vertical``."""
+    T = rng.uniform(0, len(seg), n)
+    i = np.minimum(T.astype(int), len(seg) - 1)
+    r, z = bs.evaluate(seg, i, T - i)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    on_curve = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    lo = seg.reshape(-1, 2).min(axis=0)
+    hi = seg.reshape(-1, 2).max(axis=0)
+    if kind == "outside":
+        tgt = on_curve + rng.normal(scale=0.1, size=(n, 3))
+        d = rng.normal(size=(n, 3))
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        org = tgt - 6 * d
+        d *= rng.uniform(0.3, 3.0, (n, 1))  # not unit length
+    elif kind == "inside":
+        org = np.stack([rng.uniform(-hi[0], hi[0], n), rng.uniform(-hi[0], hi[0], n),
+                        rng.uniform(lo[1], hi[1], n)], axis=1)
+        d = rng.normal(size=(n, 3))
+    elif kind in ("horizontal", "near_horizontal"):
+        tgt = on_curve + rng.normal(scale=0.05, size=(n, 3))
+        a = rng.uniform(0, 2 * np.pi, n)
+        dz = np.zeros(n)
+        if kind == "near_horizontal":
+            dz = rng.choice([1e-4, 1e-3, 1e-2, 3e-2], n) * rng.choice([-1, 1], n)
+        d = np.stack([np.cos(a), np.sin(a), dz], axis=1)
+        org = tgt - 5 * d
+    elif kind == "vertical":
+        org = np.stack([rng.uniform(-hi[0], hi[0], n), rng.uniform(-hi[0], hi[0], n),
+                        np.full(n, lo[1] - 3.0)], axis=1)
+        d = np.tile([0.0, 0.0, 1.0], (n, 1)) * rng.choice([1, -1], (n, 1))
+        org[d[:, 2] < 0, 2] = hi[1] + 3.0
+    else:
+        raise ValueError(f"bspline_rays(): unknown ray kind '{kind}'")
+    return org, d

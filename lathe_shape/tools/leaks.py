@@ -1,0 +1,149 @@
+"""Watertightness measurements of the lathe kernels (tests and scripts).
+
+A kernel leaks when a ray crosses the surface without a reported hit. Two
+measurements follow rays through all their hits:
+
+* :func:`crossing_leaks` (polyline lathes): the float64 inside test of
+  :mod:`lathe_shape.tools.reference` checks every free stretch of the ray
+  between hits, with :func:`polyline_callback` wrapping the kernel;
+* :func:`bspline_leak_rate` (B-spline lathes): a ray entering a closed
+  solid from outside must be crossed an even number of times.
+
+Needs an active JIT Mitsuba variant.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..kernels.bspline import build_bspline_data, intersect_bspline
+from ..kernels.polyline import PolylineData, intersect_polyline, polyline_geometry
+from . import reference as ref
+
+__all__ = ["leak_test_arguments", "polyline_callback", "crossing_leaks", "bspline_leak_rate"]
+
+
+def leak_test_arguments(description: str) -> argparse.Namespace:
+    """The leak test scripts' options (``n_rays`` in all, default 1e6, and
+    ``--variant``), parsed; selects the Mitsuba variant."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
+    args = parser.parse_args()
+    mi.set_variant(args.variant)
+    args.n_rays = int(args.n_rays)
+    return args
+
+
+def polyline_callback(data: PolylineData) -> Callable:
+    """The polyline kernel on numpy rays, as :func:`crossing_leaks` wants it:
+    ``intersect(o, d, active) -> (t, valid, n)`` with float64 ``(n, 3)``
+    arrays ``o``, ``d`` (rounded to float32) and the geometric normal ``n``
+    at the hits."""
+    def intersect(o, d, active):
+        o32 = mi.Point3f(o.T.astype(np.float32))
+        d32 = mi.Vector3f(d.T.astype(np.float32))
+        hit = intersect_polyline(data, o32, d32, dr.full(mi.Float, dr.inf, len(o)),
+                                 mi.Bool(active))
+        p = o32 + dr.select(hit.valid, hit.t, 0) * d32
+        geo = polyline_geometry(data, p, hit.seg, hit.u, False)
+        return (hit.t.numpy().astype(np.float64), hit.valid.numpy(),
+                geo.n.numpy().T.astype(np.float64))
+    return intersect
+
+
+def crossing_leaks(intersect: Callable, prof, o: np.ndarray, d: np.ndarray, off_rel: float = 1e-4,
+                   max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Follow rays through all their hits and flag leaks.
+
+    ``intersect(o, d, active) -> (t, valid, n)`` is the kernel under test
+    (numpy in and out, ``n`` the geometric normal at the hit). After each
+    hit the ray restarts from the hit point moved ``off_rel * scale`` along
+    the normal to the far side (as ``spawn_ray`` does) and as much along the
+    ray (so that rays through a corner leave it). Between two
+    consecutive hits (a *free segment*) the ray must stay on one side of the
+    surface: the inside test (float64, exact) at 1/4, 1/2 and 3/4 of every
+    free segment must agree, the segment before the first hit must match the
+    state of ``o``, and the segment after the last hit must be outside. A ray
+    breaking one of these crossed the surface without a reported hit: a leak.
+    Sampling inside the free segments (not right at the hits) keeps the
+    float32 position noise of grazing hits from being counted.
+
+    Returns ``(leak, n_hits)`` per ray.
+    """
+    _, z_min, z_max, scale = ref.bounds(prof)
+    centre = np.array([0.0, 0.0, 0.5 * (z_min + z_max)])
+    radius = 2.0 * scale
+    o = np.asarray(o, dtype=np.float64).copy()
+    d = np.asarray(d, dtype=np.float64)
+    dn2 = np.sum(d * d, axis=1)
+    off = off_rel * scale
+
+    def t_exit(orig):
+        # Ray parameter where the ray leaves the bounding sphere
+        oc = orig - centre
+        b = np.sum(oc * d, axis=1)
+        c = np.sum(oc * oc, axis=1) - radius**2
+        disc = np.maximum(b * b - dn2 * c, 0)
+        return np.maximum((-b + np.sqrt(disc)) / dn2, 0)
+
+    start_inside = ref.inside_profile(prof, o)
+    leak = np.zeros(len(o), dtype=bool)
+    n_hits = np.zeros(len(o), dtype=np.int64)
+    active = np.ones(len(o), dtype=bool)
+    for k in range(max_hits):
+        t, valid, n = intersect(o, d, active)
+        valid = valid & active
+        t_end = np.where(valid, t, t_exit(o))
+        states = [ref.inside_profile(prof, o + (f * t_end)[:, None] * d)
+                  for f in (0.25, 0.5, 0.75)]
+        mixed = (states[0] != states[1]) | (states[1] != states[2])
+        leak |= active & mixed
+        if k == 0:
+            leak |= active & (states[1] != start_inside)
+        # After the last hit the ray must be outside
+        leak |= active & ~valid & states[1]
+        n_hits += valid
+        side = np.where(np.sum(n * d, axis=1) >= 0, 1.0, -1.0)
+        t_off = np.where(valid, t + off / np.sqrt(dn2), 0)
+        p = o + t_off[:, None] * d + (side * off)[:, None] * n
+        o = np.where(valid[:, None], p, o)
+        active = valid
+        if not active.any():
+            break
+    return leak, n_hits
+
+
+def bspline_leak_rate(curve: str, n: int, seed: int) -> tuple[float, int]:
+    """``(rate, entered)``: of ``n`` rays from outside aimed at the test curve
+    ``curve`` (see :func:`lathe_shape.tools.reference.bspline_rays`), the
+    ``entered`` ones that hit it, and the fraction of those crossing it an
+    odd number of times. After each hit a ray restarts ``1e-4`` of the
+    curve's size past it."""
+    seg, _ = ref.bspline_curve(curve)
+    data = build_bspline_data(seg)
+    rng = np.random.default_rng(seed)
+    org, d = ref.bspline_rays("outside", seg, rng, n)
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    scale = float(np.linalg.norm(np.ptp(seg.reshape(-1, 2), axis=0)))
+    o = mi.Point3f(org.T.astype(np.float32))
+    dj = mi.Vector3f(d.T.astype(np.float32))
+    active = mi.Bool(np.ones(n, bool))
+    count = mi.UInt32(0)
+    eps = 1e-4 * scale
+    for _ in range(16):
+        hit = intersect_bspline(data, o, dj, mi.Float(dr.inf), active)
+        active &= hit.valid
+        count += mi.UInt32(active)
+        o = dr.select(active, dr.fma(dj, hit.t + eps, o), o)
+        dr.eval(o, active, count)
+        if not dr.any(active):
+            break
+    count = np.array(count)
+    entered = count > 0
+    return np.mean(count[entered] % 2 == 1), int(entered.sum())
