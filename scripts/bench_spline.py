@@ -16,20 +16,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import mitsuba as mi
-import numpy as np
 
 from lathe_shape.tools.bench import bench_arguments, bench_scene, best_render_time
 from lathe_shape.tools.images import relative_error
+from lathe_shape.tools.reference import SPLINE_GLASS
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS_SCENE = ROOT / "scenes" / "wine_glass.xml"
-
-#: Control points of the 12-segment spline glass (open form: both ends on the
-#: axis, ends tripled by the B-spline rules).
-SPLINE_GLASS = np.array([
-    (0, 0), (3.5, 0), (0.3, 0.3), (0.35, 4.5), (0.5, 7.2), (4.8, 8.8),
-    (4.0, 18.4), (3.78, 18.4), (4.45, 9.4), (0.9, 7.7), (0, 7.6),
-], dtype=float)
 
 
 def main() -> None:
