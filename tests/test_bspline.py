@@ -2,7 +2,7 @@
 Dr.Jit intersection kernel (lathe_shape.kernels.bspline).
 
 The kernel is checked against an independent float64 reference: the sextic
-of eqs. 14-15 built directly as ``|d_z o_xy + (Z - o_z) d_xy|^2 - d_z^2 R^2``
+of eqs. 13-15 built directly as ``|d_z o_xy + (Z - o_z) d_xy|^2 - d_z^2 R^2``
 and solved with numpy's companion-matrix eigenvalues (the cubic
 ``Z(t) = o_z`` plus a quadratic in s for horizontal rays).
 """

@@ -419,7 +419,7 @@ def _bezier_square(p: list) -> list:
 
 
 def _hull(Rb, Zb, ray: _Ray):
-    """Bernstein coefficients of ``F`` (eqs. 14-15, in the form of the module
+    """Bernstein coefficients of ``F`` (eqs. 13-15, in the form of the module
     docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
     float32 error of ``F`` and of these coefficients there."""
     W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
@@ -485,7 +485,7 @@ class _Leaf:
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
         self.Gb, self.tol = _hull(Rb, Zb, ray)
-        # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 14-15, times d_z^2)
+        # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 13-15, times d_z^2)
         W = [self.Z[0] - ray.zc] + self.Z[1:]
         W2 = _polymul(W, W)
         R2 = _polymul(self.R, self.R)

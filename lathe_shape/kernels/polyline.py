@@ -15,8 +15,8 @@ surface is ``n_r sqrt(x^2 + y^2) = c - n_z z``. Squaring gives
 
 which is the paper's cone frustum ``x^2 + y^2 = (A z + B)^2`` (eq. 1) scaled by
 ``n_r^2`` when ``z0 != z1``, and degenerates to the plane of the annulus
-``z = z0`` (eqs. 4-5, a double root) when ``n_r = 0``. Substituting the ray
-gives one quadratic (eqs. 2-3) for frusta, cylinders and annuli alike.
+``z = z0`` (eqs. 6-7, a double root) when ``n_r = 0``. Substituting the ray
+gives one quadratic (eq. 1 with eq. 3) for frusta, cylinders and annuli alike.
 
 The ray set-up, the threaded BVH over annular boxes in the (r, z) plane and
 its traversal step are those of every lathe kernel (kernels/common.py); this
@@ -240,7 +240,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     o, d = ray.o, ray.d
 
-    # Quadratic of eqs. 2-3 for n_r^2 r(s)^2 = (h0 + h1 s)^2 (inner nodes use
+    # Quadratic of eqs. 1 and 3 for n_r^2 r(s)^2 = (h0 + h1 s)^2 (inner nodes use
     # the cylinder r = rmax: n_r = 1, n_z = 0, c = rmax)
     nr2 = n_r * n_r
     h0 = dr.fma(-n_z, o.z, c)

@@ -3,7 +3,7 @@
 A profile lives in the (r, z) half plane: ``r >= 0`` is the distance from the
 lathe's local +z axis, ``z`` the position along it. The curve is a uniform
 cubic B-spline of the control points ``P_0 .. P_(m-1)``; segment ``i`` uses
-``P_i .. P_(i+3)`` and, for ``t`` in [0, 1], is (docs/method.md eqs. 13-14)
+``P_i .. P_(i+3)`` and, for ``t`` in [0, 1], is (docs/method.md, eq. 12)
 
     B_i(t) = ((1-t)^3 P_i + (3t^3 - 6t^2 + 4) P_(i+1)
               + (-3t^3 + 3t^2 + 3t + 1) P_(i+2) + t^3 P_(i+3)) / 6.
@@ -281,7 +281,7 @@ def power_coefficients(seg_ctrl: np.ndarray) -> np.ndarray:
 
 def evaluate(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
     """Curve point ``(R(t), Z(t))`` of segment(s) ``seg_index`` at ``t``
-    (both broadcast; eqs. 13-14)."""
+    (both broadcast; eq. 12)."""
     c = power_coefficients(seg_ctrl)[np.asarray(seg_index)]
     t = np.asarray(t, dtype=np.float64)[..., None]
     powers = np.concatenate([np.ones_like(t), t, t * t, t * t * t], axis=-1)
