@@ -20,8 +20,8 @@ valid for ``d_z = 0``::
 (This equals ``|d_z o_xy + (Z - o_z) d_xy|^2 - d_z^2 R^2``: the ray's
 projection into the (r, z) half plane is a hyperbola branch and ``F`` is its
 implicit equation along the curve.) For a horizontal ray (``d_z = 0``) ``F =
-a (Z - o_z)^2``: every root is a double root, at ``Z(t) = o_z`` (the cubic of
-method.md), and the two ray parameters follow from ``|o_xy + s d_xy| =
+a (Z - o_z)^2``: every root is a double root, at ``Z(t) = o_z`` (a cubic, eq.
+14 with ``z = o_z``), and the two ray parameters follow from ``|o_xy + s d_xy| =
 R(t)``. Nearly horizontal rays give close root pairs. The solver therefore
 reports both sign-change roots and tangent (double) roots of ``F``, and
 recovers ``s`` from whichever of the two ray equations is better
