@@ -165,8 +165,7 @@ def test_file_errors(tmp_path):
 def test_paper_specs_load_in_scene():
     """The committed paper scenes load, with the segment counts of the paper."""
     import mitsuba as mi
-
-    from tests.conftest import ROOT
+    from conftest import ROOT
 
     counts = {"fig8a": 31, "fig8b": 12, "fig9": 42, "fig10a": 58, "fig10b": 86}
     for fig, n in counts.items():
@@ -179,7 +178,7 @@ def test_paper_specs_load_in_scene():
 def test_scene_specs_build_the_scene_profiles(name):
     """scenes/NAME.csv is scenes/NAME.json built by the library (written with
     6 decimals by scripts/make_profiles.py)."""
-    from tests.conftest import ROOT
+    from conftest import ROOT
 
     built, built_sharp, _ = read_points(ROOT / "scenes" / f"{name}.json")
     stored, stored_sharp, _ = read_points(ROOT / "scenes" / f"{name}.csv")
