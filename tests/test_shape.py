@@ -204,3 +204,46 @@ def test_misses_carry_finite_fields():
     assert not si.is_valid().numpy().any()
     for field in (si.p, si.n, si.sh_frame.n, si.sh_frame.s, si.wi, si.uv, si.dp_du):
         assert np.isfinite(np.asarray(field.numpy())).all()
+
+
+def test_mesh_segments_beyond_memory_are_refused_with_the_estimate():
+    xml = ('<scene version="3.0.0"><shape type="lathe" id="g"><string name="profile" '
+           'value="0 0, 1 0, 1 2, 0 2"/><integer name="mesh_segments" value="1000000000"/>'
+           '</shape></scene>')
+    with pytest.raises(RuntimeError, match=r"lathe 'g': parameter 'mesh_segments' = 1000000000 asks for a "
+                                           r"reference mesh of 6,000,000,006 vertices, about [\d.]+ GiB"):
+        mi.load_string(xml)
+    from lathe_shape.plugin.reference_mesh import check_mesh_budget
+
+    check_mesh_budget(100, 999, "g", available=2 * 100 * 1000 * 320)
+    with pytest.raises(ValueError, match="more than half the memory available"):
+        check_mesh_budget(100, 1000, "g", available=2 * 100 * 1000 * 320)
+
+
+def test_proxy_reference_mesh_renders_the_same_exactly():
+    """``reference proxy`` keeps a 12-step stand-in for stock integrators;
+    lathe_path renders the exact surface either way."""
+    def scene(reference: str) -> mi.Scene:
+        return mi.load_dict({
+            "type": "scene",
+            "sensor": {"type": "perspective", "fov": 40,
+                       "to_world": mi.ScalarTransform4f().look_at(origin=[0, -6, 3], target=[0, 0, 1],
+                                                                  up=[0, 0, 1]),
+                       "film": {"type": "hdrfilm", "width": 24, "height": 24}},
+            "light": {"type": "point", "position": [2, -3, 5], "intensity": 30.0},
+            "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(10)},
+            "glass": {"type": "lathe", "profile": "0 0, 1 0, 1.2 1.5, 0.6 2.5, 0 2.5",
+                      "mesh_segments": 256, "reference": reference},
+        })
+
+    full, proxy = scene("mesh"), scene("proxy")
+    lathe_full = next(s for s in full.shapes() if isinstance(s, LatheShape))
+    lathe_proxy = next(s for s in proxy.shapes() if isinstance(s, LatheShape))
+    assert lathe_full.vertex_count() > 10 * lathe_proxy.vertex_count()
+    assert lathe_proxy.reference == "proxy"
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 4})
+    image_full = mi.render(full, spp=4, seed=1, integrator=integrator).numpy()
+    image_proxy = mi.render(proxy, spp=4, seed=1, integrator=integrator).numpy()
+    assert image_full.mean() > 0 and np.allclose(image_full, image_proxy, atol=1e-5)
+    with pytest.raises(RuntimeError, match="parameter 'reference': unknown mode 'none'"):
+        mi.load_dict({"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1", "reference": "none"})

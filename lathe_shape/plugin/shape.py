@@ -35,7 +35,14 @@
    * - ``mesh_segments``
      - integer
      - Azimuthal steps of the reference tessellation that stock integrators
-       render (default: 256, at least 3).
+       render (default: 256, at least 3). A mesh that would take more than
+       half the available memory is refused, with the estimate.
+   * - ``reference``
+     - string
+     - ``mesh`` (default): the full reference mesh; ``proxy``: a light,
+       coarse stand-in (12 steps) for scenes of many lathes rendered
+       exactly with ``lathe_path``, which never traces the mesh (stock
+       integrators then render the proxy; keep ``mesh`` for emitting lathes).
    * - ``to_world``
      - transform
      - Places the shape's local frame (axis = local +z) in the world.
@@ -65,6 +72,7 @@ import numpy as np
 from ..profiles import ProfileError, parse_profile_string, read_points
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .params import check_transform, describe_lathe, transform_property, typed_property
+from .reference_mesh import check_mesh_budget, reference_steps
 from .variants import register_jit_plugin
 
 __all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
@@ -116,6 +124,14 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
     return make_surface(kind, points, sharp, labels, source, crease, smooth)
 
 
+def _ring_bound(surface: PolylineSurface | BSplineSurface) -> int:
+    """Profile rings of the reference mesh, at most (polylines: two per
+    segment where every vertex is a crease; B-splines: their samples)."""
+    if isinstance(surface, BSplineSurface):
+        return len(surface.sample_profile()[0])
+    return 2 * surface.profile.segment_count
+
+
 class LatheShape(mi.Mesh):
     """A solid of revolution: reference mesh for stock integrators, exact
     intersection through :meth:`ray_intersect_exact` (see module docstring)."""
@@ -125,6 +141,9 @@ class LatheShape(mi.Mesh):
         steps = typed_property(props, "mesh_segments", int, 256, who)
         if steps < 3:
             raise ValueError(f"{who}: parameter 'mesh_segments' must be at least 3, got {steps}")
+        #: ``mesh`` (the full reference mesh) or ``proxy`` (a coarse stand-in).
+        self.reference = typed_property(props, "reference", str, "mesh", who)
+        steps = reference_steps(self.reference, steps, who)
         #: The profile kind's surface: tessellation and exact kernels.
         self.surface = load_surface(props)
         self.profile = self.surface.profile
@@ -132,6 +151,7 @@ class LatheShape(mi.Mesh):
         self.flip = typed_property(props, "flip_normals", bool, False, who)
         #: (4, 4) float64 local-to-world matrix.
         self.to_world_matrix = transform_property(props, "to_world", who)
+        check_mesh_budget(_ring_bound(self.surface), steps, who)
         #: The reference tessellation in the local frame.
         self.local_mesh = self.surface.tessellate(steps)
 

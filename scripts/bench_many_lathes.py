@@ -1,0 +1,105 @@
+"""Scenes of many lathes: load time, peak memory and exact render time
+against the lathe count, with the full reference mesh and with the proxy.
+
+A grid of wine glasses (scenes/wine_glass.csv, mesh_segments 512) on a floor
+under a constant sky, rendered with ``lathe_path``. Every case runs in a
+fresh process, so its peak memory (ru_maxrss) is its own; the render time is
+that of a second render (the first pays the JIT compilation, printed too).
+
+    python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy]
+                                        [--resolution 128x128] [--spp 4] [--variant llvm_ad_rgb]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PROFILE = ROOT / "scenes" / "wine_glass.csv"
+
+
+def scene_text(count: int, reference: str, width: int, height: int) -> str:
+    """A grid of ``count`` glasses, 32 to a row, 12 units apart."""
+    glasses = "\n".join(
+        f'<shape type="lathe" id="glass_{i}"><string name="filename" value="{PROFILE}"/>'
+        f'<string name="reference" value="{reference}"/><integer name="mesh_segments" value="512"/>'
+        f'<transform name="to_world"><translate x="{(i % 32) * 12 - 186}" y="{(i // 32) * 12}"/>'
+        '</transform><bsdf type="dielectric"/></shape>'
+        for i in range(count)
+    )
+    return f"""<scene version="3.0.0">
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0,-80,90" target="0,60,0" up="0,0,1"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="{width}"/><integer name="height" value="{height}"/>
+        </film>
+    </sensor>
+    <emitter type="constant"/>
+    <shape type="rectangle"><transform name="to_world"><scale value="400"/></transform></shape>
+    {glasses}
+</scene>"""
+
+
+def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str) -> dict:
+    """One case, in this process: load, first and second render times, peak RSS."""
+    import resource
+
+    import mitsuba as mi
+
+    from lathe_shape.cli.common import select_variant
+
+    select_variant(variant)
+    start = time.perf_counter()
+    scene = mi.load_string(scene_text(count, reference, *size))
+    load = time.perf_counter() - start
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
+    times = []
+    for seed in (0, 1):
+        start = time.perf_counter()
+        mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
+        times.append(time.perf_counter() - start)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return {"load": load, "first": times[0], "render": times[1], "peak_mb": peak}
+
+
+def main() -> None:
+    from lathe_shape.cli.common import add_render_options, parse_resolution
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1000])
+    parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"])
+    add_render_options(parser, spp_default=4, resolution_default="128x128", defines=False)
+    parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: run one case, print JSON
+    args = parser.parse_args()
+    size = parse_resolution(args.resolution)
+    if args.case:
+        count, reference = args.case.split(":")
+        print(json.dumps(measure(int(count), reference, size, args.spp, args.variant)))
+        return
+    print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, lathe_path max_depth 6, "
+          "one process per case")
+    print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'1st render [s]':>16}"
+          f"{'render [s]':>12}{'vs 256':>8}")
+    for reference in args.references:
+        base = None
+        for count in args.counts:
+            command = [sys.executable, __file__, "--case", f"{count}:{reference}", "--resolution",
+                       args.resolution, "--spp", str(args.spp), "--variant", args.variant]
+            result = subprocess.run(command, capture_output=True, text=True)
+            if result.returncode != 0:
+                print(f"{count:>7}{reference:>10}  failed: {result.stderr.strip().splitlines()[-1:]}")
+                continue
+            r = json.loads(result.stdout.strip().splitlines()[-1])
+            base = r["render"] if count == 256 else base
+            ratio = f"{r['render'] / base:7.2f}x" if base else "      -"
+            print(f"{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}{r['first']:>16.2f}"
+                  f"{r['render']:>12.2f}{ratio:>8}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
