@@ -1,15 +1,19 @@
-"""Speed of the exact polyline lathe, as ratios measured in one run.
+"""Speed of the exact polyline lathe against the mesh a user would render,
+as ratios measured in one run.
 
-1. `lathe_path` (exact) against stock `path` on the reference mesh
-   (mesh_segments 2048), same scene, spp and max_depth: target <= 1.0x.
-2. `lathe_path` on a 300-segment profile against a 31-segment profile of the
-   same goblet in the same scene: target <= 1.3x.
+1. Per scene and max_depth: `lathe_path` (exact) against stock `path` on the
+   reference mesh at the scene's own `mesh_segments` (512), and against the
+   coarsest mesh whose render agrees with the exact one within noise on the
+   glass pixels (found first, see `tools.bench.coarsest_agreeing_mesh`).
+2. `lathe_path` on goblet profiles of 31 ... 1000 segments in one scene.
+3. The first render in a fresh process with an empty kernel cache (JIT
+   compilation included), `path` on the mesh against `lathe_path`.
 
-Each time is the best of --repeat renders after one warm-up render (which
-pays the JIT compilation).
+Times are medians of --repeat interleaved renders (A B C A B C ...) after a
+warm-up render of each case, with their min-max spread.
 
-    python scripts/bench_polyline.py [--resolution 256x256] [--spp 16] [--max-depth 8] [--repeat 3]
-                                     [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...]
+    python scripts/bench_polyline.py [--resolution 256x256] [--spp 16] [--max-depth 8 16] [--repeat 5]
+                                     [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...] [--no-cold]
 """
 
 from __future__ import annotations
@@ -19,7 +23,14 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.tools.bench import bench_arguments, bench_scene, best_render_time
+from lathe_shape.tools.bench import (
+    bench_arguments,
+    bench_scene,
+    coarsest_agreeing_mesh,
+    cold_first_render,
+    interleaved_render_times,
+    median_spread,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,35 +55,80 @@ def goblet_profile(segments: int) -> np.ndarray:
     return np.vstack([[[0.0, 0.0]], outer, inner, [[0.0, base + 0.6]]])
 
 
-def main() -> None:
-    args = bench_arguments(__doc__.splitlines()[0])
+SCENES = ("wine_glass", "sundae_cup", "brandy_bottle")
+
+
+def timing(times: list[float]) -> str:
+    median, low, high = median_spread(times)
+    return f"{median:.3f} ({low:.3f}-{high:.3f})"
+
+
+def exact_against_meshes(args, name: str, max_depth: int) -> None:
+    """Section 1 for one scene and depth."""
     from lathe_shape.plugin.shape import scene_lathes
 
-    width, height = args.size
-    path_int = mi.load_dict({"type": "path", "max_depth": args.max_depth})
-    exact_int = mi.load_dict({"type": "lathe_path", "max_depth": args.max_depth})
-    print(f"variant {args.variant}, {width}x{height}, {args.spp} spp, max_depth {args.max_depth}, "
-          f"best of {args.repeat}")
+    scene_file = ROOT / "scenes" / f"{name}.xml"
+    depth = {"max_depth": str(max_depth)}
+    scene = bench_scene(args, scene_file, **depth)  # the scene's own mesh_segments
+    coarse, error, noise = coarsest_agreeing_mesh(
+        lambda n: bench_scene(args, scene_file, mesh_segments=str(n), **depth), scene, max_depth,
+        args.spp, args.seed)
+    cases = {
+        "default": (scene, mi.load_dict({"type": "path", "max_depth": max_depth})),
+        "exact": (scene, mi.load_dict({"type": "lathe_path", "max_depth": max_depth})),
+    }
+    if coarse is not None:
+        coarse_scene = bench_scene(args, scene_file, mesh_segments=str(coarse), **depth)
+        cases["coarse"] = (coarse_scene, cases["default"][1])
+    times = interleaved_render_times(cases, args.spp, args.repeat, args.seed)
+    exact = median_spread(times["exact"])[0]
+    row = (f"{name:<14}{max_depth:>6}{scene_lathes(scene)[0].mesh_segments:>7}{timing(times['default']):>24}"
+           f"{timing(times['exact']):>24}{exact / median_spread(times['default'])[0]:>8.2f}x")
+    if coarse is None:
+        row += f"{'none agrees':>14}"
+    else:
+        row += f"{coarse:>6} ({error:.4f}<{noise:.4f}){timing(times['coarse']):>24}"
+        row += f"{exact / median_spread(times['coarse'])[0]:>8.2f}x"
+    print(row, flush=True)
 
-    print("\n1) exact lathe vs reference mesh (mesh_segments 2048)")
-    print(f"{'scene':<15}{'segments':>9}{'mesh path [s]':>15}{'lathe_path [s]':>16}{'exact/mesh':>12}")
-    for name in ("wine_glass", "sundae_cup", "brandy_bottle"):
-        scene = bench_scene(args, ROOT / "scenes" / f"{name}.xml", mesh_segments="2048")
-        lathe = scene_lathes(scene)[0]
-        t_mesh, _ = best_render_time(scene, path_int, args.spp, args.repeat, args.seed)
-        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat, args.seed)
-        print(f"{name:<15}{lathe.profile.segment_count:>9}{t_mesh:>15.3f}{t_exact:>16.3f}"
-              f"{t_exact / t_mesh:>11.2f}x", flush=True)
+
+def main() -> None:
+    args = bench_arguments(__doc__.splitlines()[0], repeat=5, depths=(8, 16), extra=lambda parser: (
+        parser.add_argument("--no-cold", action="store_true", help="skip the cold-cache first renders")))
+    width, height = args.size
+    print(f"variant {args.variant}, {width}x{height}, {args.spp} spp, median (min-max) of {args.repeat} "
+          "interleaved renders")
+
+    print("\n1) exact lathe vs stock path on the scene's mesh and on the coarsest mesh within noise")
+    print(f"{'scene':<14}{'depth':>6}{'mesh':>7}{'path, scene mesh [s]':>24}{'lathe_path [s]':>24}"
+          f"{'ratio':>9}{'coarsest (err<noise)':>24}{'path, coarsest [s]':>20}{'ratio':>9}")
+    for max_depth in args.max_depths:
+        for name in SCENES:
+            exact_against_meshes(args, name, max_depth)
 
     print("\n2) exact lathe: segment count scaling (goblet in the wine_glass scene)")
-    print(f"{'segments':>9}{'lathe_path [s]':>16}{'vs 31':>9}")
-    base = None
+    cases = {}
     for segments in (31, 86, 300, 1000):
         scene = bench_scene(args, ROOT / "scenes" / "wine_glass.xml", goblet_profile(segments),
-                            mesh_segments="64")
-        t_exact, _ = best_render_time(scene, exact_int, args.spp, args.repeat, args.seed)
-        base = base or t_exact
-        print(f"{segments:>9}{t_exact:>16.3f}{t_exact / base:>8.2f}x", flush=True)
+                            mesh_segments="64", max_depth=str(args.max_depths[0]))
+        cases[segments] = (scene, mi.load_dict({"type": "lathe_path", "max_depth": args.max_depths[0]}))
+    times = interleaved_render_times(cases, args.spp, args.repeat, args.seed)
+    base = median_spread(times[31])[0]
+    print(f"{'segments':>9}{'lathe_path [s]':>24}{'vs 31':>9}")
+    for segments, values in times.items():
+        print(f"{segments:>9}{timing(values):>24}{median_spread(values)[0] / base:>8.2f}x", flush=True)
+
+    if args.no_cold:
+        return
+    print("\n3) first render from an empty kernel cache (fresh process, brandy bottle)")
+    defines = {"res": str(width), "spp": str(args.spp), "max_depth": str(args.max_depths[0])}
+    scene_file = ROOT / "scenes" / "brandy_bottle.xml"
+    first = {name: [cold_first_render(scene_file, name, args.variant, defines) for _ in range(2)]
+             for name in ("path", "lathe_path")}
+    for name, values in first.items():
+        print(f"{name:<12}{timing(values):>24}")
+    ratio = median_spread(first["lathe_path"])[0] / median_spread(first["path"])[0]
+    print(f"lathe_path / path: {ratio:.2f}x")
 
 
 if __name__ == "__main__":

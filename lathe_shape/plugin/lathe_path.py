@@ -111,6 +111,15 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         self._geometry = geometry if geometry.lathes else None
         return geometry
 
+    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
+               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
+        """Mitsuba's render, with the scene geometry built first: built
+        inside :meth:`sample`, after the render has queued its camera rays,
+        it would evaluate part of that work early and make the first
+        render's kernel differ from every later one (a second compilation)."""
+        self.geometry(scene)
+        return super().render(scene, sensor, seed, spp, develop, evaluate)
+
     @dr.syntax
     def sample(
         self,

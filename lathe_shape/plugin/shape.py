@@ -144,6 +144,8 @@ class LatheShape(mi.Mesh):
         #: ``mesh`` (the full reference mesh) or ``proxy`` (a coarse stand-in).
         self.reference = typed_property(props, "reference", str, "mesh", who)
         steps = reference_steps(self.reference, steps, who)
+        #: Azimuthal steps of the reference mesh (after ``reference``).
+        self.mesh_segments = steps
         #: The profile kind's surface: tessellation and exact kernels.
         self.surface = load_surface(props)
         self.profile = self.surface.profile
