@@ -1,5 +1,5 @@
 """Helpers of the benchmark scripts: their shared options, render timing
-(interleaved repeats summarised by median and spread, or best of N), the
+(interleaved repeats summarised by median and spread), the
 first render from a cold kernel cache, the coarsest reference mesh that
 agrees with the exact render, and scene files loaded with the options
 applied (and, optionally, the lathe's profile replaced inline)."""
@@ -19,7 +19,6 @@ from .scenes import load_string_in, replace_profile, set_film_size
 __all__ = [
     "bench_arguments",
     "bench_scene",
-    "best_render_time",
     "cold_first_render",
     "coarsest_agreeing_mesh",
     "interleaved_render_times",
@@ -98,20 +97,6 @@ def bench_scene(args: argparse.Namespace, scene_file: str | Path, points: np.nda
     :func:`load_with_profile`."""
     values = {"spp": str(args.spp), "max_depth": str(args.max_depth), **defines, **args.define_values}
     return load_with_profile(scene_file, points, kind, args.size, **values)
-
-
-def best_render_time(scene: mi.Scene, integrator: mi.Integrator, spp: int,
-                     repeat: int, seed: int = 0) -> tuple[float, np.ndarray]:
-    """Best wall time of ``repeat`` renders (seeds ``seed + 1``, ...) after a
-    warm-up render with ``seed`` (which pays the JIT compilation), and the
-    last image."""
-    image = mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
-    times = []
-    for k in range(repeat):
-        start = time.perf_counter()
-        image = mi.render(scene, spp=spp, seed=seed + k + 1, integrator=integrator).numpy()
-        times.append(time.perf_counter() - start)
-    return min(times), image
 
 
 def interleaved_render_times(cases: dict[str, tuple[mi.Scene, mi.Integrator]], spp: int, repeat: int,
