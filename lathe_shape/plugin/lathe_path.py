@@ -80,7 +80,7 @@ def parse_aovs(text: str, who: str = "lathe_path") -> tuple[str, ...]:
     for name in names:
         if name not in AOV_CHANNELS:
             raise ValueError(
-                f"{who}: parameter 'aovs': unknown guide '{name}' (expected any of: {', '.join(AOV_CHANNELS)})"
+                f"{who}: parameter 'aovs': unknown guide '{name}' (expected: {', '.join(AOV_CHANNELS)})"
             )
     if len(set(names)) != len(names):
         raise ValueError(f"{who}: parameter 'aovs' names a guide twice: '{text}'")

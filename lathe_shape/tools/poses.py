@@ -17,7 +17,20 @@ import math
 
 import numpy as np
 
-__all__ = ["lathe_axis", "orbit_matrix", "rotate_z", "rotation_about_axis", "spin_matrix", "world_matrix"]
+__all__ = [
+    "DEFAULT_MODE",
+    "MODES",
+    "MODE_ALIASES",
+    "lathe_axis", "orbit_matrix", "rotate_z", "rotation_about_axis", "spin_matrix",
+    "world_matrix",
+]
+
+#: The ways of turning: orbit the camera, turn the world, spin the lathe.
+MODES = ("orbit", "world", "spin")
+#: Other names accepted for a mode.
+MODE_ALIASES = {"rotate": "spin"}
+#: The mode of a turntable that names none.
+DEFAULT_MODE = "orbit"
 
 
 def _cos_sin(angle_deg: float) -> tuple[float, float]:

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["WorldTurner"]
+__all__ = ["WorldTurner", "transform_matrix"]
 
 #: Emitters that are invariant under any rotation.
 _INVARIANT_EMITTERS = ("ConstantBackgroundEmitter",)
 
 
-def _matrix(transform: object) -> np.ndarray:
+def transform_matrix(transform: object) -> np.ndarray:
     """A Mitsuba (JIT or scalar) transform -> (4, 4) float64."""
     m = np.array(transform.matrix, dtype=np.float64)
     return m.reshape(4, 4) if m.size == 16 else m[..., 0]
@@ -77,7 +77,10 @@ class WorldTurner:
             if not isinstance(node, (mi.Shape, mi.Emitter)):
                 continue
             value = self.params[key]
-            original = _matrix(value) if kind == "to_world" else np.array(value, dtype=np.float64).reshape(-1, 3)
+            if kind == "to_world":
+                original = transform_matrix(value)
+            else:
+                original = np.array(value, dtype=np.float64).reshape(-1, 3)
             self.turned.append(_Turned(key, kind, original))
             moved.add(node.ptr)
         #: Descriptions of the scene objects that cannot be turned.
@@ -108,8 +111,10 @@ class WorldTurner:
             if item.kind != "normals":
                 values += rotation[:3, 3].astype(np.float32)
             current = type(self.params[item.key])
-            # A point light's position is one Point3f, mesh buffers are flat.
-            self.params[item.key] = current(*(float(v) for v in values[0])) if item.kind == "point" else current(values.ravel())
+            if item.kind == "point":  # a point light's position is one Point3f
+                self.params[item.key] = current(*(float(v) for v in values[0]))
+            else:  # mesh buffers are flat
+                self.params[item.key] = current(values.ravel())
         self.params.update()
         for lathe, original in self.lathes:
             lathe.set_to_world(rotation @ original, self.scene)
