@@ -10,17 +10,23 @@ it); the albedo guide tells it what is texture.
 OptiX is used only when its weights file ships with the driver
 (``/usr/share/nvidia/nvoptix.bin``): without it, constructing and running
 ``mi.OptixDenoiser`` ends the process with no Python exception to catch.
-Otherwise OIDN is used, and :attr:`Denoiser.note` says why.
+Otherwise OIDN is used, and :func:`choose_backend` says why.
+
+Frames to denoise are rendered with a ``box`` reconstruction filter
+(:func:`box_filter_xml`): a wider filter (Mitsuba's default ``gaussian``)
+splats each sample into neighbouring pixels, and the denoiser then takes the
+correlated noise for detail and keeps it.
 """
 
 from __future__ import annotations
 
 import importlib
 import os
+import xml.etree.ElementTree as ET
 
 import numpy as np
 
-__all__ = ["BACKENDS", "OPTIX_WEIGHTS", "DenoiseError", "Denoiser", "choose_backend"]
+__all__ = ["BACKENDS", "OPTIX_WEIGHTS", "DenoiseError", "Denoiser", "box_filter_xml", "choose_backend"]
 
 #: The denoisers, by name.
 BACKENDS = ("oidn", "optix")
@@ -38,6 +44,20 @@ def _has_oidn() -> bool:
     except ImportError:
         return False
     return True
+
+
+def box_filter_xml(xml_text: str, source: str = "scene") -> str:
+    """The scene text with every film's reconstruction filter set to
+    ``box`` (the filter a denoiser expects: independent pixel noise)."""
+    try:
+        root = ET.fromstring(xml_text)
+    except ET.ParseError as e:
+        raise DenoiseError(f"{source}: not a valid XML file ({e})") from None
+    for film in root.iter("film"):
+        for old in film.findall("rfilter"):
+            film.remove(old)
+        ET.SubElement(film, "rfilter", {"type": "box"})
+    return ET.tostring(root, encoding="unicode")
 
 
 def choose_backend(variant: str, weights: str = OPTIX_WEIGHTS) -> tuple[str, str]:
