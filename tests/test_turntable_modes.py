@@ -76,12 +76,12 @@ def test_world_turner_moves_emitters_and_shapes():
 
 
 TEXTURED = """<scene version="3.0.0">
+    <emitter type="constant"/>
     <integrator type="lathe_path"><integer name="max_depth" value="3"/></integrator>
     <sensor type="perspective">
-        <transform name="to_world"><lookat origin="0, -6, 1" target="0, 0, 1" up="0, 0, 1"/></transform>
         <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="24"/></film>
+        <transform name="to_world"><lookat origin="0, -6, 1" target="0, 0, 1" up="0, 0, 1"/></transform>
     </sensor>
-    <emitter type="constant"/>
     <shape type="lathe" id="vase">
         <string name="profile" value="0 0, 1 0, 1 2, 0 2"/>
         <bsdf type="diffuse">$texture</bsdf>

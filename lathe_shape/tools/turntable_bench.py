@@ -8,10 +8,12 @@ the frame-to-frame flicker of the seeding policies.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
+import re
 import tempfile
 import time
-from collections.abc import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -21,7 +23,7 @@ from .denoise import Denoiser
 from .images import relative_error
 from .turntable import Turntable
 
-__all__ = ["denoise_errors", "flicker", "frame_times", "lathe_mask"]
+__all__ = ["bench_parser", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench"]
 
 
 def lathe_mask(turntable: Turntable) -> np.ndarray:
@@ -38,46 +40,39 @@ def lathe_mask(turntable: Turntable) -> np.ndarray:
     return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
 
 
-def _median_seconds(run: Callable[[int], object], frames: int) -> float:
-    """Median wall time of ``run(k)`` for k in 0..frames-1 (after one warm-up
-    call that compiles the kernels)."""
-    run(0)
-    times = []
-    for k in range(frames):
-        start = time.perf_counter()
-        run(k)
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
-
-
 def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution: int,
-                defines: list[str], extra: list[str] = ()) -> dict[str, float]:
+                defines: list[str], extra: list[str] = (), rounds: int = 3) -> dict[str, float]:
     """Seconds per frame: ``lathe-turntable`` in-process (posing, render,
-    transfer, writes) and a bare ``mi.render`` loop over the same orbit
-    poses; ``ratio`` is the first over the second."""
+    transfer, denoising and writes) and a bare ``mi.render`` loop over the
+    same orbit poses, alternating ``rounds`` times (the median of the rounds
+    for each: timings on a shared machine drift); ``ratio`` is the first
+    over the second."""
     from ..cli.turntable import main
     from .scenes import load_scene
-    from .turntable import Turntable
 
     define_args = [a for d in defines for a in ("-D", d)]
-    size = f"{resolution}x{resolution}"
-    with tempfile.TemporaryDirectory() as folder:
-        job = [scene_path, "--variant", variant, "--count", str(frames), "--spp", str(spp),
-               "--resolution", size, *define_args, *extra]
-        main([*job, "-o", os.path.join(folder, "warm"), "--frames", "0"])  # compile
-        start = time.perf_counter()
-        main([*job, "-o", os.path.join(folder, "turn")])
-        cli = (time.perf_counter() - start) / frames
     values = dict(d.split("=", 1) for d in defines)
     turntable = Turntable(load_scene(scene_path, values, (resolution, resolution)))
-
-    def bare(k: int) -> None:
-        turntable.pose(360.0 * k / frames)
-        dr.eval(mi.render(turntable.scene, spp=spp, seed=k, integrator=turntable.integrator))
-        dr.sync_thread()
-
-    render = _median_seconds(bare, frames)
-    return {"turntable_s": cli, "render_s": render, "ratio": cli / render}
+    cli, bare = [], []
+    output = io.StringIO()
+    with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stdout(output), \
+            contextlib.redirect_stderr(io.StringIO()):
+        job = [scene_path, "--variant", variant, "--count", str(frames), "--spp", str(spp),
+               "--resolution", f"{resolution}x{resolution}", "-o", folder, "--force", *define_args, *extra]
+        main([*job, "--frames", "0"])  # compiles the kernels
+        turntable.render(0.0, spp=spp)
+        for _ in range(rounds):
+            main(job)
+            # The command's own time for its frame loop (writes included).
+            cli.append(float(re.findall(r" in ([0-9.]+) s", output.getvalue())[-1]) / frames)
+            start = time.perf_counter()
+            for k in range(frames):
+                turntable.pose(360.0 * k / frames)
+                dr.eval(mi.render(turntable.scene, spp=spp, seed=0, integrator=turntable.integrator))
+                dr.sync_thread()
+            bare.append((time.perf_counter() - start) / frames)
+    cli_s, bare_s = float(np.median(cli)), float(np.median(bare))
+    return {"turntable_s": cli_s, "render_s": bare_s, "ratio": cli_s / bare_s}
 
 
 def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
@@ -123,6 +118,39 @@ def flicker(turntable: Turntable, angles: list[float], spp: int, reference_spp: 
         frames = np.stack([frame(a, k if policy == "frame" else 0, spp) for k, a in enumerate(angles)])
         result[policy] = float(np.abs(np.diff(frames, axis=0) - motion).mean() / reference.mean())
     return result
+
+
+def run_bench(argv: list[str] | None = None) -> None:
+    """``scripts/bench_turntable.py``: print the frame times, the masked
+    denoise errors and the flicker of both seeding policies."""
+    from ..cli.common import select_variant
+    from .denoise import box_filter_xml
+    from .scenes import load_string_in, set_film_size
+
+    args = bench_parser().parse_args(argv)
+    defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
+    select_variant(args.variant)
+    times = frame_times(args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    print(f"per frame, {args.resolution}x{args.resolution} {args.spp} spp ({args.variant}): lathe-turntable "
+          f"{times['turntable_s'] * 1e3:.1f} ms, bare mi.render {times['render_s'] * 1e3:.1f} ms, "
+          f"ratio {times['ratio']:.2f}")
+    job = (args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    times = frame_times(*job, ["--denoise"])
+    print(f"  with --denoise: {times['turntable_s'] * 1e3:.1f} ms per frame, ratio {times['ratio']:.2f}")
+    with open(args.scene, encoding="utf-8") as f:
+        text = set_film_size(box_filter_xml(f.read()), (args.resolution, args.resolution))
+    folder = os.path.dirname(os.path.abspath(args.scene))
+    values = dict(d.split("=", 1) for d in defines)
+    turntable = Turntable(load_string_in(folder, text, **values), guides=True)
+    print("relative error on the glass pixels against", args.reference_spp, "spp (box filter):")
+    for name, value in denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp).items():
+        print(f"  {name}: {value:.4f}" if isinstance(value, float) else f"  {name}: {value}")
+    world = Turntable(load_string_in(folder, text, **values), "world", guides=True)
+    angles = [2.0 * k for k in range(8)]
+    for denoise in (False, True):
+        result = flicker(world, angles, args.spp, args.high_spp, denoise)
+        print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
+              + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
 
 
 def bench_parser() -> argparse.ArgumentParser:
