@@ -133,11 +133,9 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         self._geometry = None
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The scene's exact-lathe ray queries; rebuilt when the scene's
-        shapes change (another scene, or shapes moved or edited)."""
-        if self._geometry is not None and self._geometry.matches(scene):
-            return self._geometry
-        geometry = ExactSceneGeometry(scene)
+        """The scene's exact-lathe ray queries; follows the scene's edits
+        (see :meth:`ExactSceneGeometry.for_scene`)."""
+        geometry = ExactSceneGeometry.for_scene(scene, self._geometry)
         # Without lathes the geometry is the scene itself: not kept, as the
         # scene owns this integrator.
         self._geometry = geometry if geometry.lathes else None

@@ -18,6 +18,8 @@ that keeps it (say a square floor turned by 90 degrees).
 
 from __future__ import annotations
 
+import copy
+
 import drjit as dr
 import mitsuba as mi
 
@@ -81,18 +83,27 @@ class ExactSceneGeometry:
 
     def matches(self, scene: mi.Scene) -> bool:
         """Whether this geometry is still valid for ``scene``: the same
-        shapes (refreshed in place when non-lathe shapes moved)."""
-        if self.fingerprint != self.scene_fingerprint(scene):
-            return False
-        bounds = self.rest_bounds(scene)
-        if bounds != self.bounds:
-            self.refresh()
-            self.bounds = bounds
-        return True
+        shapes, none of the non-lathe ones moved since (lathes may move)."""
+        return self.fingerprint == self.scene_fingerprint(scene) and self.bounds == self.rest_bounds(scene)
+
+    @classmethod
+    def for_scene(cls, scene: mi.Scene, previous: ExactSceneGeometry | None = None) -> ExactSceneGeometry:
+        """The geometry of ``scene``: ``previous`` while it matches; when
+        only non-lathe shapes moved, a new geometry sharing ``previous``'s
+        second scene with its acceleration structure rebuilt (no new
+        scene); else a new one."""
+        if previous is None or previous.fingerprint != cls.scene_fingerprint(scene):
+            return cls(scene)
+        if previous.bounds == cls.rest_bounds(scene):
+            return previous
+        moved = copy.copy(previous)
+        moved.refresh()
+        moved.bounds = cls.rest_bounds(scene)
+        return moved
 
     def mark_moved(self) -> None:
         """Non-lathe shapes moved (perhaps keeping their bounds): the next
-        query rebuilds their acceleration structure."""
+        :meth:`for_scene` rebuilds their acceleration structure."""
         self.bounds = None
 
     def refresh(self) -> None:

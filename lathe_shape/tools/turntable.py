@@ -264,9 +264,12 @@ class Turntable:
             self.lathe.set_to_world(spin_matrix(self.lathe_to_world, angle_deg),
                                     None if self._exact else self.scene)
         elif self.mode == "world":
+            # The geometry of the previous pose: told that its shapes moved
+            # (a turn may keep their bounds), so the next render refreshes it.
+            geometry = self.integrator.geometry(self.scene) if self._exact else None
             self._world.turn(world_matrix(self.lathe_to_world, angle_deg))
-            if self._exact:
-                self.integrator.geometry(self.scene).mark_moved()
+            if geometry is not None:
+                geometry.mark_moved()
         else:
             matrix = orbit_matrix(self.sensor_to_world, self.lathe_to_world, angle_deg)
             params = mi.traverse(self.scene)
