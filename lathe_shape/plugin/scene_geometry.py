@@ -101,6 +101,11 @@ class ExactSceneGeometry:
         moved.bounds = cls.rest_bounds(scene)
         return moved
 
+    def accept_moves(self, scene: mi.Scene) -> None:
+        """The caller moved non-lathe shapes through ``mi.traverse(self.rest)``
+        (which rebuilt this scene's structure): their new bounds are valid."""
+        self.bounds = self.rest_bounds(scene)
+
     def mark_moved(self) -> None:
         """Non-lathe shapes moved (perhaps keeping their bounds): the next
         :meth:`for_scene` rebuilds their acceleration structure."""

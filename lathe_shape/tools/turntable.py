@@ -222,7 +222,10 @@ class Turntable:
                 "use --mode orbit or --mode world to show it turning"
             )
         elif self.mode == "world":
-            self._world = WorldTurner(self.scene, self.lathe)
+            # lathe_path traces a scene of the non-lathe shapes: turning
+            # them through it spares the full scene's rebuild.
+            rest = self.integrator.geometry(self.scene).rest if self._exact else None
+            self._world = WorldTurner(self.scene, self.lathe, rest)
             if self._world.fixed:
                 self.warnings.append(
                     "world mode cannot turn " + ", ".join(self._world.fixed)
@@ -264,12 +267,10 @@ class Turntable:
             self.lathe.set_to_world(spin_matrix(self.lathe_to_world, angle_deg),
                                     None if self._exact else self.scene)
         elif self.mode == "world":
-            # The geometry of the previous pose: told that its shapes moved
-            # (a turn may keep their bounds), so the next render refreshes it.
             geometry = self.integrator.geometry(self.scene) if self._exact else None
             self._world.turn(world_matrix(self.lathe_to_world, angle_deg))
-            if geometry is not None:
-                geometry.mark_moved()
+            if geometry is not None:  # the turn rebuilt lathe_path's scene already
+                geometry.accept_moves(self.scene)
         else:
             matrix = orbit_matrix(self.sensor_to_world, self.lathe_to_world, angle_deg)
             params = mi.traverse(self.scene)
