@@ -225,7 +225,7 @@ class Turntable:
             # lathe_path traces a scene of the non-lathe shapes: turning
             # them through it spares the full scene's rebuild.
             rest = self.integrator.geometry(self.scene).rest if self._exact else None
-            self._world = WorldTurner(self.scene, self.lathe, rest)
+            self._world = WorldTurner(self.scene, self.lathe, None if rest is self.scene else rest)
             if self._world.fixed:
                 self.warnings.append(
                     "world mode cannot turn " + ", ".join(self._world.fixed)
