@@ -161,7 +161,8 @@ def test_lathes_in_file_order(tmp_path):
 
 def test_frames_and_metadata(tmp_path, capsys):
     out = tmp_path / "turn"  # created by the tool
-    code, stdout, stderr = run(capsys, WINE, "-o", str(out), "--count", "2", "--seed", "5", *FAST)
+    code, stdout, stderr = run(capsys, WINE, "-o", str(out), "--count", "2", "--seed", "5", "--mode", "spin",
+                               "--seeds", "frame", *FAST)
     assert code == 0, stderr
     assert frames_in(out) == ["frame_0000.exr", "frame_0000.png", "frame_0001.exr", "frame_0001.png"]
     assert "rendered 2 frame(s), skipped 0" in stdout and str(out) in stdout
@@ -169,7 +170,7 @@ def test_frames_and_metadata(tmp_path, capsys):
     rgb, header = read_exr(out / "frame_0001.exr")
     assert rgb.shape == (24, 24, 3) and np.isfinite(rgb).all() and rgb.mean() > 0
     expected = {"frame": 1, "count": 2, "angle_deg": 180.0, "spp": 2, "integrator": "PathIntegrator",
-                "seed": 6, "mode": "rotate", "object": "wine_glass"}
+                "seed": 6, "mode": "spin", "object": "wine_glass"}
     assert {k: header[k] for k in expected} == expected
     assert header["compression"] == OpenEXR.ZIP_COMPRESSION
     with OpenEXR.File(str(out / "frame_0001.exr")) as exr:
@@ -236,7 +237,8 @@ def test_rotation_and_orbit(tmp_path, capsys, prism):
     # Rotate: the prism turns by 36 degrees between frames (its most
     # different pose: a pentagon repeats every 72 degrees).
     rot = tmp_path / "rotate"
-    code, stdout, _ = run(capsys, prism, "-o", str(rot), "--count", "10", "--frames", "0:2", *FAST)
+    code, stdout, _ = run(capsys, prism, "-o", str(rot), "--count", "10", "--frames", "0:2", "--mode", "spin",
+                          "--seeds", "frame", *FAST)
     assert code == 0 and "lathe 'prism' spins" in stdout  # the first lathe of the file
 
     # The same poses through the library, with one seed: they differ by the
@@ -253,7 +255,7 @@ def test_rotation_and_orbit(tmp_path, capsys, prism):
     # --object picks another lathe; the prism then stays still.
     knob = tmp_path / "knob"
     code, stdout, _ = run(capsys, prism, "-o", str(knob), "--count", "10", "--frames", "1",
-                          "--object", "knob", *FAST)
+                          "--object", "knob", "--mode", "spin", "--seeds", "frame", *FAST)
     assert code == 0 and "lathe 'knob' spins" in stdout
     assert read_exr(knob / "frame_0001.exr")[1]["object"] == "knob"
     k1 = pixels(knob, 1)
@@ -363,7 +365,7 @@ def test_errors(tmp_path, capsys, prism, monkeypatch):
 
     no_lathe = tmp_path / "no_lathe.xml"
     no_lathe.write_text(PRISM_XML.split('<shape type="lathe" id="prism">')[0] + "</scene>")
-    assert "no lathe shape to rotate" in error(str(no_lathe), "-o", out)
+    assert "no lathe shape to rotate" in error(str(no_lathe), "-o", out, "--mode", "spin")
     no_sensor = tmp_path / "no_sensor.xml"
     no_sensor.write_text(PRISM_XML.split("<sensor")[0] + PRISM_XML.split("</sensor>")[1])
     assert "the scene has no sensor" in error(str(no_sensor), "-o", out)

@@ -1,14 +1,19 @@
-"""``lathe-turntable``: render a full turn of a lathe (or of the camera about
-it) as numbered EXR + PNG frames, optionally assembled into a GIF or MP4.
+"""``lathe-turntable``: render a full turn about a lathe (the camera orbits
+it, the world turns about it, or the lathe spins) as numbered EXR + PNG
+frames, optionally denoised, optionally assembled into a GIF or MP4.
 
 Frame ``k`` of ``--count N`` shows the turn at ``360 * k / N`` degrees and is
-sampled with seed ``--seed + k``, so the job can be split with ``--frames``
-across processes or machines, and an interrupted run resumes where it
-stopped (finished frames are skipped).
+sampled with seed ``--seed`` (``--seeds same``, the default: the noise stays
+put instead of flickering) or ``--seed + k`` (``--seeds frame``), so the job
+can be split with ``--frames`` across processes or machines, and an
+interrupted run resumes where it stopped (finished frames are skipped).
+Frame ``k`` is denoised and written by a background thread while frame
+``k + 1`` renders.
 
 Example::
 
     lathe-turntable scenes/wine_glass.xml -o turn --count 36 --spp 64 --gif
+    lathe-turntable scenes/wine_glass.xml -o turn --mode world --denoise -D integrator=lathe_path
     lathe-turntable scenes/wine_glass.xml -o turn --count 36 --frames 0:18   # machine 1
     lathe-turntable scenes/wine_glass.xml -o turn --count 36 --frames 18:36  # machine 2
 """
@@ -16,6 +21,7 @@ Example::
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 import time
@@ -34,6 +40,9 @@ from .common import (
 )
 
 if TYPE_CHECKING:  # imported where needed: --help needs no Mitsuba variant
+    import numpy as np
+
+    from ..tools.denoise import Denoiser
     from ..tools.frames import Frame
     from ..tools.turntable import Turntable
 
@@ -44,14 +53,18 @@ PROG = "lathe-turntable"
 #: The animations ``--gif`` / ``--mp4`` write into the output folder.
 VIDEOS = ("gif", "mp4")
 
+#: Seeding policies: one seed for all frames, or ``--seed + k`` for frame k.
+SEED_POLICIES = ("same", "frame")
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = command_parser(
         PROG,
-        "Render a 360-degree turntable of a Mitsuba 3 scene with lathe shapes: the lathe spins "
-        "about its own axis (or, with --orbit, the camera orbits it). Writes frame_0000.exr "
-        "(linear, half float) + frame_0000.png (sRGB), ... to the output folder; finished frames "
-        "are skipped, so re-running an interrupted job resumes it.",
+        "Render a 360-degree turntable of a Mitsuba 3 scene with lathe shapes: the camera orbits "
+        "the lathe's axis (default), the world turns about it (--mode world), or the lathe spins "
+        "(--mode spin, for textured lathes). Writes frame_0000.exr (linear, half float) + "
+        "frame_0000.png (sRGB), ... to the output folder; finished frames are skipped, so re-running "
+        "an interrupted job resumes it.",
     )
     add_output_option(parser, what="frame_NNNN.exr/.png, turntable.gif/.mp4",
                       default_help="SCENE_turntable in the current folder")
@@ -64,11 +77,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--object", metavar="ID",
                         help="id of the lathe to turn or orbit (default: the first lathe in the scene)")
+    add_mode_options(parser)
+    add_render_options(parser, seed_help="sampler seed (default: 0); see --seeds")
     parser.add_argument(
-        "--orbit", action="store_true",
-        help="orbit the camera (the first sensor) about the lathe's axis instead of spinning the lathe",
+        "--seeds", choices=SEED_POLICIES, default="same",
+        help="'same': every frame uses SEED, so the noise stays put on screen instead of flickering "
+        "(default); 'frame': frame k uses SEED + k (independent noise, e.g. to average frames)",
     )
-    add_render_options(parser, seed_help="base sampler seed; frame k uses SEED + k (default: 0)")
     parser.add_argument(
         "--threads", type=int, metavar="N",
         help="Dr.Jit worker threads (default: all cores); 1 makes LLVM renders bit-reproducible also with "
@@ -80,6 +95,27 @@ def build_parser() -> argparse.ArgumentParser:
                             help=f"assemble all frames present into the output folder's turntable.{fmt}")
     parser.add_argument("--fps", type=float, default=12.0, help="GIF/MP4 frame rate (default: 12)")
     return parser
+
+
+def add_mode_options(parser: argparse.ArgumentParser) -> None:
+    """``--mode``, its alias ``--orbit``, and ``--denoise``."""
+    from ..tools.poses import DEFAULT_MODE, MODES
+
+    parser.add_argument(
+        "--mode", choices=MODES, default=None,
+        help=f"how the turn is shown (default: {DEFAULT_MODE}): 'orbit' moves the camera (the first "
+        "sensor) about the lathe's axis; 'world' keeps camera and lathe and turns the environment, the "
+        "emitters and the other shapes about the axis; 'spin' turns the lathe itself, which only shows "
+        "for a textured lathe",
+    )
+    parser.add_argument("--orbit", dest="mode", action="store_const", const="orbit",
+                        help="same as --mode orbit")
+    parser.add_argument(
+        "--denoise", action="store_true",
+        help="denoise every frame (Intel Open Image Denoise, pip install lathe_shape[denoise]; OptiX on "
+        "CUDA variants whose driver ships its weights), guided by albedo and normals; the EXR keeps the "
+        "noisy image as the layer 'noisy'",
+    )
 
 
 def parse_frames(text: str | None, count: int) -> range:
@@ -131,6 +167,9 @@ class Job:
     spp: int
     size: tuple[int, int]
     integrator: str
+    #: The frames' denoiser (None without --denoise) and what to tell about it.
+    denoiser: Denoiser | None = None
+    notes: tuple[str, ...] = ()
 
     def metadata(self, frame: Frame) -> dict[str, object]:
         """The EXR header of ``frame`` (without its render time)."""
@@ -143,14 +182,37 @@ class Job:
             "seed": int(frame.seed),
             "mode": self.turntable.mode,
             "object": self.turntable.object_id,
+            "denoiser": "none" if self.denoiser is None else self.denoiser.backend,
             "variant": self.args.variant,
             "scene": os.path.abspath(self.args.scene),
         }
 
 
+def open_box_filtered_scene(args: argparse.Namespace) -> object:
+    """The scene of ``args`` (variant, -D, --resolution) with box
+    reconstruction filters, for denoising (see :mod:`..tools.denoise`)."""
+    from ..tools.denoise import box_filter_xml
+    from ..tools.scenes import SceneError, load_string_in, set_film_size
+    from .common import parse_defines, parse_resolution, select_variant
+
+    select_variant(args.variant)
+    if not os.path.isfile(args.scene):
+        raise SceneError(f"scene file '{args.scene}' not found")
+    with open(args.scene, encoding="utf-8") as f:
+        text = box_filter_xml(f.read(), args.scene)
+    if args.resolution:
+        text = set_film_size(text, parse_resolution(args.resolution), args.scene)
+    folder = os.path.dirname(os.path.abspath(args.scene))
+    try:
+        return load_string_in(folder, text, **parse_defines(args.defines))
+    except RuntimeError as e:
+        raise SceneError(f"{args.scene}: could not load the scene:\n{e}") from None
+
+
 def open_job(args: argparse.Namespace) -> Job:
     """Check the options, load and pose the scene, create the output folder
     (last: a failed job leaves nothing behind)."""
+    from ..tools.denoise import Denoiser, choose_backend
     from ..tools.scenes import integrator_name
     from ..tools.turntable import Turntable
     from ..tools.video import require_video
@@ -165,33 +227,40 @@ def open_job(args: argparse.Namespace) -> Job:
     for fmt in VIDEOS:
         if getattr(args, fmt):
             require_video(fmt, what=f"--{fmt}")
-    scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
-    turntable = Turntable(scene, "orbit" if args.orbit else "rotate", args.object, scene_path=args.scene)
+    backend, note = choose_backend(args.variant) if args.denoise else ("", "")
+    if args.denoise:
+        scene = open_box_filtered_scene(args)
+    else:
+        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
+    turntable = Turntable(scene, args.mode, args.object, scene_path=args.scene, guides=args.denoise)
     stem = os.path.splitext(os.path.basename(args.scene))[0]
     out_dir = output_folder(args.output or f"{stem}_turntable")
     sensor = turntable.sensor
     size = tuple(int(v) for v in sensor.film().size())
     spp = args.spp or sensor.sampler().sample_count()
-    return Job(args, turntable, indices, out_dir, spp, size, integrator_name(turntable.integrator))
+    denoiser = None
+    if backend:
+        denoiser = Denoiser(backend, to_sensor=sensor.world_transform().inverse())
+    notes = tuple(turntable.warnings) + ((note,) if note else ())
+    return Job(args, turntable, indices, out_dir, spp, size, integrator_name(turntable.integrator),
+               denoiser, notes)
 
 
 def describe(job: Job) -> None:
     """Print what the job renders."""
-    args, turntable = job.args, job.turntable
-    label = f"'{turntable.object_id}'" if turntable.object_id else "(without id)"
-    if turntable.mode == "rotate":
-        what = f"lathe {label} spins about its axis"
-    elif turntable.lathe is not None:
-        what = f"camera orbits lathe {label}"
-    else:
-        what = "camera orbits the world z axis (no lathe in the scene)"
+    args = job.args
+    for note in job.notes:
+        print(f"{PROG}: warning: {note}", file=sys.stderr, flush=True)
+    what = job.turntable.describe()
+    seeds = "" if args.seeds == "same" else " + frame"
+    denoised = "" if job.denoiser is None else f", denoised ({job.denoiser.backend})"
     shard = "" if len(job.indices) == args.count else f", frames {job.indices.start}:{job.indices.stop}"
     threads = "" if args.threads is None else f", {args.threads} thread(s)"
     print(
         f"{PROG}: {args.scene} -> {job.out_dir}{os.sep}\n"
         f"  {what}: {args.count} frames of {360.0 / args.count:g} deg{shard}\n"
         f"  {job.size[0]}x{job.size[1]}, {job.spp} spp, integrator {job.integrator}, variant {args.variant}, "
-        f"seed {args.seed} + frame{threads}",
+        f"seed {args.seed}{seeds}{threads}{denoised}",
         flush=True,
     )
 
@@ -223,25 +292,51 @@ def pending_frames(job: Job, frames: list[Frame]) -> list[Frame]:
     return todo
 
 
+def clean_frame(job: Job, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(image to show, noisy image or None): the rendered RGB denoised with
+    its guides under --denoise, else as rendered."""
+    rgb = image[..., :3]
+    if job.denoiser is None:
+        return rgb, None
+    return job.denoiser(rgb, image[..., 3:6], image[..., 6:9]), rgb
+
+
+def finish_frame(job: Job, frame: Frame, image: np.ndarray, seconds: float,
+                 cleaned: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+    """Denoise (unless ``cleaned`` already holds the result) and write one
+    rendered frame; runs in the writer thread."""
+    from ..tools.frames import write_frame
+
+    rgb, noisy = cleaned or clean_frame(job, image)
+    try:
+        write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)}, noisy=noisy)
+    except OSError as e:
+        raise CliError(f"cannot write frame: {e}") from None
+
+
 def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
-    """Render and write the frames of ``todo``, advancing ``progress``
-    (skipping those another process on the same folder finished meanwhile)."""
-    from ..tools.frames import frame_state, write_frame
+    """Render the frames of ``todo``, advancing ``progress`` (skipping those
+    another process on the same folder finished meanwhile); a background
+    thread denoises and writes frame k while frame k + 1 renders."""
+    from ..tools.frames import frame_state
+    from ..tools.writer import FrameWriter
 
     if todo:
         progress.show()
-    for frame in todo:
-        if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
-            progress.advance(None)
-            continue
-        start = time.perf_counter()
-        rgb = job.turntable.render(frame.angle_deg, spp=job.spp, seed=frame.seed)
-        seconds = time.perf_counter() - start
-        try:
-            write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)})
-        except OSError as e:
-            raise CliError(f"cannot write frame: {e}") from None
-        progress.advance(seconds)
+    with FrameWriter() as writer:
+        for frame in todo:
+            if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
+                progress.advance(None)
+                continue
+            start = time.perf_counter()
+            image = job.turntable.render(frame.angle_deg, spp=job.spp, seed=frame.seed)
+            seconds = time.perf_counter() - start
+            cleaned = None
+            if job.denoiser is not None and job.denoiser.backend == "optix":
+                # OptiX runs on the renderer's GPU stream: not from another thread.
+                cleaned = clean_frame(job, image)
+            writer.submit(functools.partial(finish_frame, job, frame, image, seconds, cleaned))
+            progress.advance(seconds)
 
 
 def render_job(job: Job) -> int:
@@ -252,7 +347,8 @@ def render_job(job: Job) -> int:
     from ..tools.frames import plan_frames
     from .common import format_duration
 
-    frames = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed)
+    frames = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed,
+                         same_seed=job.args.seeds == "same")
     todo = pending_frames(job, frames)
     progress = ProgressBar(len(frames), done=len(frames) - len(todo))
     threads = dr.thread_count()

@@ -23,6 +23,19 @@
        ``terminate`` stops the path there (the paper's rule); ``fallback``
        (default) redoes that vertex with the geometric normal, which conserves
        energy for dielectrics and removes the speckles of ``none``.
+   * - ``aovs``
+     - string
+     - Comma-separated guide images for a denoiser, appended after the
+       image's RGB(A) channels in this order: ``albedo`` (channels
+       ``albedo.R``, ``albedo.G``, ``albedo.B``) and ``nn`` (the shading
+       normal, ``nn.X``, ``nn.Y``, ``nn.Z``, world space, turned to face the
+       ray), named as Mitsuba's ``aov`` integrator names them. (Default: none)
+   * - ``aov_through_delta``
+     - boolean
+     - Where the guides are taken: ``true`` (default) at the first vertex
+       whose BSDF is not a Dirac delta, seen through glass and mirrors (the
+       albedo weighted by the delta bounces' throughput); ``false`` at the
+       first surface hit, a glass surface then having albedo 1.
 
 Every ``lathe`` in the scene is intersected exactly by its kernel, merged with
 Mitsuba's hit on the rest of the scene (see :mod:`lathe_shape.plugin.scene_geometry`);
@@ -52,10 +65,26 @@ from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
-__all__ = ["LathePathIntegrator", "NORMAL_CHECKS", "register"]
+__all__ = ["AOV_CHANNELS", "LathePathIntegrator", "NORMAL_CHECKS", "parse_aovs", "register"]
 
 #: Policies of the ``normal_check`` parameter (docs/method.md, eq. 11).
 NORMAL_CHECKS = ("none", "terminate", "fallback")
+
+#: The guide images of the ``aovs`` parameter and their channel names.
+AOV_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "nn": ("nn.X", "nn.Y", "nn.Z")}
+
+
+def parse_aovs(text: str, who: str = "lathe_path") -> tuple[str, ...]:
+    """The ``aovs`` parameter (``"albedo,nn"``) -> ``("albedo", "nn")``."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    for name in names:
+        if name not in AOV_CHANNELS:
+            raise ValueError(
+                f"{who}: parameter 'aovs': unknown guide '{name}' (expected: {', '.join(AOV_CHANNELS)})"
+            )
+    if len(set(names)) != len(names):
+        raise ValueError(f"{who}: parameter 'aovs' names a guide twice: '{text}'")
+    return names
 
 
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
@@ -98,14 +127,15 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 f"lathe_path: parameter 'normal_check': unknown policy '{self.normal_check}' "
                 f"(expected one of: {', '.join(NORMAL_CHECKS)})"
             )
+        #: The guide images rendered as AOVs (see ``aovs``).
+        self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who))
+        self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
         self._geometry = None
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The scene's exact-lathe ray queries; rebuilt when the scene's
-        shapes change (another scene, or shapes moved or edited)."""
-        if self._geometry is not None and self._geometry.matches(scene):
-            return self._geometry
-        geometry = ExactSceneGeometry(scene)
+        """The scene's exact-lathe ray queries; follows the scene's edits
+        (see :meth:`ExactSceneGeometry.for_scene`)."""
+        geometry = ExactSceneGeometry.for_scene(scene, self._geometry)
         # Without lathes the geometry is the scene itself: not kept, as the
         # scene owns this integrator.
         self._geometry = geometry if geometry.lathes else None
@@ -143,6 +173,11 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         bsdf_pdf_prev = mi.Float(1.0)        # BSDF pdf of the direction that led here
         bsdf_delta_prev = mi.Bool(True)      # ... and whether it was a Dirac delta
         valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
+        want_guides = len(self.aovs) > 0
+        through_delta = self.aov_through_delta
+        albedo = mi.Spectrum(0.0)            # Albedo guide (AOV)
+        normal = mi.Vector3f(0.0)            # Normal guide (AOV)
+        guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
 
         while dr.hint(active, max_iterations=-1, label="lathe_path"):
             si = geometry.ray_intersect(ray, active)
@@ -154,7 +189,8 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
             show = active & (depth > 0) if self.hide_emitters else active
-            L += beta * mis_bsdf * ds.emitter.eval(si, show)
+            emitted = ds.emitter.eval(si, show)
+            L += beta * mis_bsdf * emitted
 
             active_next = active & valid & (depth + 1 < self.max_depth)
 
@@ -168,6 +204,19 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 si = with_geometric_frame(si, bad_in)
 
             bsdf = si.bsdf(ray)
+
+            # ------------- Denoiser guides (the aovs parameter) -------------
+            if dr.hint(want_guides, mode="scalar"):
+                smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                here = guide_open & active & valid & (smooth if through_delta else True)
+                reflectance = dr.select(smooth, bsdf.eval_diffuse_reflectance(si, here), 1.0)
+                albedo[here] = dr.clip(beta * reflectance, 0.0, 1.0)
+                facing = dr.select(mi.Frame3f.cos_theta(si.wi) < 0.0, -si.sh_frame.n, si.sh_frame.n)
+                normal[here] = facing
+                # A miss (or a path ended by max_depth) shows the emitter seen.
+                gone = guide_open & active & (~valid | ~active_next)
+                albedo[gone & ~here] = dr.clip(beta * emitted, 0.0, 1.0)
+                guide_open &= ~(here | gone)
 
             # ---------------------- Emitter sampling ----------------------
             active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -226,16 +275,18 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
             active = active_next
 
-        return L, valid_ray, []
+        guides = {"albedo": [albedo.x, albedo.y, albedo.z], "nn": [normal.x, normal.y, normal.z]}
+        return L, valid_ray, [channel for name in self.aovs for channel in guides[name]]
 
     def aov_names(self) -> list[str]:
-        return []
+        return [channel for name in self.aovs for channel in AOV_CHANNELS[name]]
 
     def to_string(self) -> str:
         depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
         return (
             f"LathePathIntegrator[max_depth={depth}, rr_depth={self.rr_depth}, "
-            f"hide_emitters={self.hide_emitters}, normal_check='{self.normal_check}']"
+            f"hide_emitters={self.hide_emitters}, normal_check='{self.normal_check}', "
+            f"aovs='{','.join(self.aovs)}']"
         )
 
 

@@ -6,9 +6,19 @@ original scene's non-lathe shape objects (the objects are shared, so BSDFs,
 area emitters and textures are the same), Mitsuba traces it, and every lathe's
 exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
 reference triangles are therefore never reported.
+
+The second scene is built once per set of shapes. A lathe that moves needs
+nothing (its kernel reads its transform); when other shapes move (through
+``mi.traverse`` of the original scene, which updates the shared objects in
+place) only the second scene's acceleration structure is rebuilt
+(:meth:`ExactSceneGeometry.refresh`): automatically when a shape's bounding
+box changed, and after :meth:`ExactSceneGeometry.mark_moved` for a move
+that keeps it (say a square floor turned by 90 degrees).
 """
 
 from __future__ import annotations
+
+import copy
 
 import drjit as dr
 import mitsuba as mi
@@ -25,6 +35,7 @@ class ExactSceneGeometry:
         # No reference to the scene itself: it owns the integrator that owns
         # this object (a cycle through C++ references would never be freed).
         self.fingerprint = self.scene_fingerprint(scene)
+        self.bounds = self.rest_bounds(scene)
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = scene_lathes(scene)
         others = [s for s in shapes if not isinstance(s, LatheShape)]
@@ -60,14 +71,57 @@ class ExactSceneGeometry:
 
     @staticmethod
     def scene_fingerprint(scene: mi.Scene) -> tuple:
-        """Identity and bounds of every shape: changes when the scene is
-        another one, or when shapes are moved or edited (mi.traverse)."""
-        boxes = ((shape.ptr, shape.bbox()) for shape in scene.shapes())
-        return tuple((ptr, tuple(box.min), tuple(box.max)) for ptr, box in boxes)
+        """Identity of every shape (lathes apart): changes when the scene is
+        another one or its shapes are others."""
+        return tuple((shape.ptr, isinstance(shape, LatheShape)) for shape in scene.shapes())
+
+    @staticmethod
+    def rest_bounds(scene: mi.Scene) -> tuple:
+        """Bounds of the non-lathe shapes: change when one is moved or edited."""
+        boxes = (shape.bbox() for shape in scene.shapes() if not isinstance(shape, LatheShape))
+        return tuple((tuple(box.min), tuple(box.max)) for box in boxes)
 
     def matches(self, scene: mi.Scene) -> bool:
-        """Whether this geometry is still valid for ``scene``."""
-        return self.fingerprint == self.scene_fingerprint(scene)
+        """Whether this geometry is still valid for ``scene``: the same
+        shapes, none of the non-lathe ones moved since (lathes may move)."""
+        return self.fingerprint == self.scene_fingerprint(scene) and self.bounds == self.rest_bounds(scene)
+
+    @classmethod
+    def for_scene(cls, scene: mi.Scene, previous: ExactSceneGeometry | None = None) -> ExactSceneGeometry:
+        """The geometry of ``scene``: ``previous`` while it matches; when
+        only non-lathe shapes moved, a new geometry sharing ``previous``'s
+        second scene with its acceleration structure rebuilt (no new
+        scene); else a new one."""
+        if previous is None or previous.fingerprint != cls.scene_fingerprint(scene):
+            return cls(scene)
+        if previous.bounds == cls.rest_bounds(scene):
+            return previous
+        moved = copy.copy(previous)
+        moved.refresh()
+        moved.bounds = cls.rest_bounds(scene)
+        return moved
+
+    def accept_moves(self, scene: mi.Scene) -> None:
+        """The caller moved non-lathe shapes through ``mi.traverse(self.rest)``
+        (which rebuilt this scene's structure): their new bounds are valid."""
+        self.bounds = self.rest_bounds(scene)
+
+    def mark_moved(self) -> None:
+        """Non-lathe shapes moved (perhaps keeping their bounds): the next
+        :meth:`for_scene` rebuilds their acceleration structure."""
+        self.bounds = None
+
+    def refresh(self) -> None:
+        """Rebuild the acceleration structure of the non-lathe shapes after
+        they were moved or edited in the original scene (the objects are
+        shared: only this scene's own structure is stale)."""
+        if self.rest is None or not self.lathes:
+            return  # without lathes the original scene is traced directly
+        params = mi.traverse(self.rest)
+        for key in params.keys():
+            if key.split(".")[-1] in ("to_world", "vertex_positions"):
+                params.set_dirty(key)
+        params.update()
 
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""

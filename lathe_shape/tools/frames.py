@@ -5,7 +5,14 @@ that never leave a half-written file under a final name.
 Frame ``k`` of a ``count``-frame turn shows the turn at ``360 * k / count``
 degrees, is sampled with seed ``seed + k`` and is stored as
 ``frame_000k.exr`` (linear, half float, with the job's metadata in the
-header) and ``frame_000k.png`` (sRGB preview).
+header) and ``frame_000k.png`` (sRGB preview). A denoised frame's EXR holds
+the denoised image as RGB and the noisy one as the layer ``noisy``
+(channels ``noisy.R``, ``noisy.G``, ``noisy.B``); its PNG shows the
+denoised image.
+
+With ``same_seed`` every frame is sampled with ``seed`` itself: the noise
+then stays put on the screen from frame to frame instead of flickering
+(the CLI's default; see ``lathe-turntable --seeds``).
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
+import OpenEXR
 
 from .images import read_exr, write_exr, write_png
 
@@ -31,10 +39,11 @@ __all__ = [
     "frame_stem",
     "plan_frames",
     "write_frame",
+    "write_layered_exr",
 ]
 
 #: Header attributes a finished frame must match to be skipped on resume.
-JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator")
+JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator", "denoiser")
 
 
 @dataclass(frozen=True)
@@ -60,15 +69,18 @@ def frame_stem(index: int, count: int) -> str:
     return f"frame_{index:0{digits}d}"
 
 
-def plan_frames(count: int, frames: Sequence[int], out_dir: str | os.PathLike, seed: int = 0) -> list[Frame]:
+def plan_frames(count: int, frames: Sequence[int], out_dir: str | os.PathLike, seed: int = 0,
+                same_seed: bool = False) -> list[Frame]:
     """The :class:`Frame` list for ``frames`` (indices) of a ``count``-frame
-    turn written to ``out_dir``; frame ``k`` is sampled with seed ``seed + k``."""
+    turn written to ``out_dir``; frame ``k`` is sampled with seed ``seed + k``
+    (``seed`` for all frames with ``same_seed``)."""
     out_dir = os.fspath(out_dir)
     plan = []
     for index in frames:
         stem = os.path.join(out_dir, frame_stem(index, count))
         angle = frame_angle(index, count)
-        plan.append(Frame(index, count, angle, seed + index, stem + ".exr", stem + ".png"))
+        frame_seed = seed if same_seed else seed + index
+        plan.append(Frame(index, count, angle, frame_seed, stem + ".exr", stem + ".png"))
     return plan
 
 
@@ -121,13 +133,32 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
             os.remove(tmp)
 
 
-def write_frame(frame: Frame, rgb: np.ndarray, metadata: dict[str, object]) -> None:
-    """Write a frame's half-float EXR (with ``metadata``) and sRGB PNG
-    atomically, the EXR last: a frame whose EXR exists is complete."""
+def write_layered_exr(path: str | os.PathLike, rgb: np.ndarray, layers: dict[str, np.ndarray],
+                      metadata: dict[str, object] | None = None) -> None:
+    """A half-float ZIP EXR with ``rgb`` as R, G, B and each (H, W, 3) image
+    of ``layers`` as ``NAME.R``, ``NAME.G``, ``NAME.B``; ``metadata`` entries
+    become header attributes (numbers as numbers, the rest as text)."""
+    header: dict[str, object] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    header.update({k: v if isinstance(v, (int, float)) else str(v) for k, v in (metadata or {}).items()})
+    channels = {"RGB": rgb, **layers}
+    half = {name: np.ascontiguousarray(np.asarray(image)[..., :3], dtype=np.float16)
+            for name, image in channels.items()}
+    with OpenEXR.File(header, half) as exr:
+        exr.write(os.fspath(path))
+
+
+def write_frame(frame: Frame, rgb: np.ndarray, metadata: dict[str, object],
+                noisy: np.ndarray | None = None) -> None:
+    """Write a frame's half-float EXR (with ``metadata``; ``noisy``, when
+    given, as the layer ``noisy``) and sRGB PNG atomically, the EXR last: a
+    frame whose EXR exists is complete."""
     with atomic_path(frame.exr) as tmp_exr:
         with atomic_path(frame.png) as tmp_png:
             write_png(tmp_png, rgb)
-            write_exr(tmp_exr, rgb, metadata, half=True)
+            if noisy is None:
+                write_exr(tmp_exr, rgb, metadata, half=True)
+            else:
+                write_layered_exr(tmp_exr, rgb, {"noisy": noisy}, metadata)
 
 
 def frame_pngs(out_dir: str | os.PathLike, count: int) -> list[str]:

@@ -1,10 +1,14 @@
 """The poses of a turntable: 4x4 rigid transforms (float64 NumPy) that spin a
-lathe about its own axis or move a camera about it.
+lathe about its own axis, move a camera about it, or turn the rest of the
+world about it.
 
 A lathe's axis is its local +z: in world space, the line through the
 ``to_world`` origin along the transformed +z. Spinning the lathe by ``a``
 and orbiting the camera by ``-a`` about that axis show the lathe from the
-same side (exactly so for a rigid ``to_world``).
+same side (exactly so for a rigid ``to_world``). Turning the world (every
+emitter and every other shape) by ``-a`` about the axis turns the lathe by
+``a`` against its surroundings, as spinning it does, while the camera keeps
+its view of the lathe.
 """
 
 from __future__ import annotations
@@ -13,7 +17,20 @@ import math
 
 import numpy as np
 
-__all__ = ["lathe_axis", "orbit_matrix", "rotate_z", "rotation_about_axis", "spin_matrix"]
+__all__ = [
+    "DEFAULT_MODE",
+    "MODES",
+    "MODE_ALIASES",
+    "lathe_axis", "orbit_matrix", "rotate_z", "rotation_about_axis", "spin_matrix",
+    "world_matrix",
+]
+
+#: The ways of turning: orbit the camera, turn the world, spin the lathe.
+MODES = ("orbit", "world", "spin")
+#: Other names accepted for a mode.
+MODE_ALIASES = {"rotate": "spin"}
+#: The mode of a turntable that names none.
+DEFAULT_MODE = "orbit"
 
 
 def _cos_sin(angle_deg: float) -> tuple[float, float]:
@@ -74,8 +91,16 @@ def orbit_matrix(
     """The sensor's ``to_world`` moved by ``-angle_deg`` about the object's
     axis (the world z axis through the origin when ``object_to_world`` is
     None), so the object appears to turn by ``+angle_deg``."""
+    return world_matrix(object_to_world, angle_deg) @ np.asarray(sensor_to_world, dtype=np.float64)
+
+
+def world_matrix(object_to_world: np.ndarray | None, angle_deg: float) -> np.ndarray:
+    """The rotation applied to the rest of the world (emitters, other shapes)
+    in ``world`` mode: ``-angle_deg`` about the object's axis (the world z
+    axis through the origin when ``object_to_world`` is None), so the object
+    turns by ``+angle_deg`` against its surroundings."""
     if object_to_world is None:
         origin, axis = np.zeros(3), np.array([0.0, 0.0, 1.0])
     else:
         origin, axis = lathe_axis(object_to_world)
-    return rotation_about_axis(origin, axis, -angle_deg) @ np.asarray(sensor_to_world, dtype=np.float64)
+    return rotation_about_axis(origin, axis, -angle_deg)

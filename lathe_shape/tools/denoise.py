@@ -1,0 +1,119 @@
+"""Denoising rendered frames: Intel Open Image Denoise (``pyoidn``, the
+optional extra ``lathe_shape[denoise]``, on the CPU) or, on CUDA variants
+where it is known to be safe, Mitsuba's OptiX denoiser.
+
+Both take the albedo and normal guides the ``lathe_path`` integrator renders
+as AOVs (its ``aovs`` parameter). Without guides a denoiser keeps the sparse
+caustic speckles of glass on a textured floor (they look like texture to
+it); the albedo guide tells it what is texture.
+
+OptiX is used only when its weights file ships with the driver
+(``/usr/share/nvidia/nvoptix.bin``): without it, constructing and running
+``mi.OptixDenoiser`` ends the process with no Python exception to catch.
+Otherwise OIDN is used, and :func:`choose_backend` says why.
+
+Frames to denoise are rendered with a ``box`` reconstruction filter
+(:func:`box_filter_xml`): a wider filter (Mitsuba's default ``gaussian``)
+splats each sample into neighbouring pixels, and the denoiser then takes the
+correlated noise for detail and keeps it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+__all__ = ["BACKENDS", "OPTIX_WEIGHTS", "DenoiseError", "Denoiser", "box_filter_xml", "choose_backend"]
+
+#: The denoisers, by name.
+BACKENDS = ("oidn", "optix")
+#: Where the NVIDIA driver keeps the OptiX denoiser's weights.
+OPTIX_WEIGHTS = "/usr/share/nvidia/nvoptix.bin"
+
+
+class DenoiseError(RuntimeError):
+    """No denoiser can run; the message says what to install."""
+
+
+def _has_oidn() -> bool:
+    try:
+        importlib.import_module("pyoidn")
+    except ImportError:
+        return False
+    return True
+
+
+def box_filter_xml(xml_text: str, source: str = "scene") -> str:
+    """The scene text with every film's reconstruction filter set to
+    ``box`` (the filter a denoiser expects: independent pixel noise)."""
+    try:
+        root = ET.fromstring(xml_text)
+    except ET.ParseError as e:
+        raise DenoiseError(f"{source}: not a valid XML file ({e})") from None
+    for film in root.iter("film"):
+        for old in film.findall("rfilter"):
+            film.remove(old)
+        ET.SubElement(film, "rfilter", {"type": "box"})
+    return ET.tostring(root, encoding="unicode")
+
+
+def choose_backend(variant: str, weights: str = OPTIX_WEIGHTS) -> tuple[str, str]:
+    """(backend, note): OptiX on a CUDA ``variant`` whose driver has the
+    weights file, else OIDN; ``note`` explains a fall-back ("" when none).
+    Raises :class:`DenoiseError` when neither is available."""
+    note = ""
+    if variant.startswith("cuda"):
+        if os.path.isfile(weights):
+            return "optix", ""
+        note = f"OptiX denoiser weights ({weights}) missing: denoising with Intel Open Image Denoise"
+    if _has_oidn():
+        return "oidn", note
+    raise DenoiseError(
+        "denoising needs Intel Open Image Denoise (module 'pyoidn' not found): "
+        "pip install lathe_shape[denoise]"
+    )
+
+
+class Denoiser:
+    """Denoises (H, W, 3) linear HDR images with optional albedo and normal
+    guides of the same size; ``backend`` is ``"oidn"`` or ``"optix"``.
+    OptiX wants normals in the sensor's frame: ``to_sensor`` is the sensor's
+    world-to-camera transform (``sensor.world_transform().inverse()``)."""
+
+    def __init__(self, backend: str = "oidn", to_sensor: object | None = None) -> None:
+        if backend not in BACKENDS:
+            raise DenoiseError(f"unknown denoiser '{backend}' (expected one of: {', '.join(BACKENDS)})")
+        self.backend = backend
+        self._optix = None
+        self._to_sensor = to_sensor
+
+    def __call__(self, rgb: np.ndarray, albedo: np.ndarray | None = None,
+                 normal: np.ndarray | None = None) -> np.ndarray:
+        """The denoised image (float32, the shape of ``rgb``)."""
+        rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+        if self.backend == "optix":
+            return self._run_optix(rgb, albedo, normal)
+        import pyoidn
+
+        guides = [None if g is None else np.ascontiguousarray(g, dtype=np.float32) for g in (albedo, normal)]
+        if guides[0] is None:
+            guides[1] = None  # OIDN takes normals only together with an albedo
+        return pyoidn.denoise(np.maximum(rgb, 0.0), guides[0], guides[1], hdr=True)
+
+    def _run_optix(self, rgb: np.ndarray, albedo: np.ndarray | None,
+                   normal: np.ndarray | None) -> np.ndarray:
+        import mitsuba as mi
+
+        size = mi.ScalarVector2u(rgb.shape[1], rgb.shape[0])
+        if self._optix is None:
+            self._optix = mi.OptixDenoiser(size, albedo=albedo is not None, normals=normal is not None)
+        guides = {}
+        if albedo is not None:
+            guides["albedo"] = mi.TensorXf(np.ascontiguousarray(albedo, dtype=np.float32))
+        if normal is not None:
+            guides["normals"] = mi.TensorXf(np.ascontiguousarray(normal, dtype=np.float32))
+            guides["to_sensor"] = self._to_sensor
+        return np.asarray(self._optix(mi.TensorXf(rgb), **guides).numpy(), dtype=np.float32)

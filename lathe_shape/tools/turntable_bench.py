@@ -1,0 +1,168 @@
+"""Measurements of turntables (the library behind
+``scripts/bench_turntable.py``): the per-frame cost of ``lathe-turntable``
+against a bare ``mi.render`` loop over the same poses, the error of noisy
+and denoised frames on the lathe's pixels against a high-spp reference, and
+the frame-to-frame flicker of the seeding policies.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import re
+import tempfile
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .denoise import Denoiser
+from .images import relative_error
+from .turntable import Turntable
+
+__all__ = ["bench_parser", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench"]
+
+
+def lathe_mask(turntable: Turntable) -> np.ndarray:
+    """(H, W) bool: the pixels whose centre ray hits the turntable's lathe
+    (exactly) before anything else."""
+    from ..plugin.scene_geometry import ExactSceneGeometry
+
+    width, height = (int(v) for v in turntable.sensor.film().size())
+    index = dr.arange(mi.UInt32, width * height)
+    pixel = mi.Point2f(mi.Float(index % width) + 0.5, mi.Float(index // width) + 0.5)
+    ray, _ = turntable.sensor.sample_ray(0.0, 0.5, pixel / mi.ScalarPoint2f(width, height), mi.Point2f(0.5))
+    si = ExactSceneGeometry(turntable.scene).ray_intersect(mi.Ray3f(ray), mi.Bool(True))
+    hit = si.is_valid() & (si.shape == mi.ShapePtr(turntable.lathe))
+    return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
+
+
+def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution: int,
+                defines: list[str], extra: list[str] = (), rounds: int = 3) -> dict[str, float]:
+    """Seconds per frame: ``lathe-turntable`` in-process (posing, render,
+    transfer, denoising and writes) and a bare ``mi.render`` loop over the
+    same orbit poses, alternating ``rounds`` times (the median of the rounds
+    for each: timings on a shared machine drift); ``ratio`` is the first
+    over the second."""
+    from ..cli.turntable import main
+    from .scenes import load_scene
+
+    define_args = [a for d in defines for a in ("-D", d)]
+    values = dict(d.split("=", 1) for d in defines)
+    turntable = Turntable(load_scene(scene_path, values, (resolution, resolution)))
+    cli, bare = [], []
+    output = io.StringIO()
+    with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stdout(output), \
+            contextlib.redirect_stderr(io.StringIO()):
+        job = [scene_path, "--variant", variant, "--count", str(frames), "--spp", str(spp),
+               "--resolution", f"{resolution}x{resolution}", "-o", folder, "--force", *define_args, *extra]
+        main([*job, "--frames", "0"])  # compiles the kernels
+        turntable.render(0.0, spp=spp)
+        for _ in range(rounds):
+            main(job)
+            # The command's own time for its frame loop (writes included).
+            cli.append(float(re.findall(r" in ([0-9.]+) s", output.getvalue())[-1]) / frames)
+            start = time.perf_counter()
+            for k in range(frames):
+                turntable.pose(360.0 * k / frames)
+                dr.eval(mi.render(turntable.scene, spp=spp, seed=0, integrator=turntable.integrator))
+                dr.sync_thread()
+            bare.append((time.perf_counter() - start) / frames)
+    cli_s, bare_s = float(np.median(cli)), float(np.median(bare))
+    return {"turntable_s": cli_s, "render_s": bare_s, "ratio": cli_s / bare_s}
+
+
+def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
+                   seed: int = 0) -> dict[str, float]:
+    """Relative error on the lathe's pixels against a ``reference_spp``
+    render: ``spp`` frames noisy and denoised (with the integrator's guides,
+    with the albedo guide only, without guides) and a ``high_spp`` frame."""
+    turntable.pose(angle)
+    mask = lathe_mask(turntable)
+    reference = turntable.render(angle, spp=reference_spp, seed=seed + 1)[..., :3]
+    image = turntable.render(angle, spp=spp, seed=seed)
+    rgb, albedo, normal = image[..., :3], image[..., 3:6], image[..., 6:9]
+    denoise = Denoiser("oidn")
+    high = turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3]
+    return {
+        f"noisy_{spp}spp": relative_error(rgb, reference, mask),
+        f"denoised_{spp}spp": relative_error(denoise(rgb, albedo, normal), reference, mask),
+        f"denoised_{spp}spp_albedo_only": relative_error(denoise(rgb, albedo), reference, mask),
+        f"denoised_{spp}spp_no_guides": relative_error(denoise(rgb), reference, mask),
+        f"noisy_{high_spp}spp": relative_error(high, reference, mask),
+        "glass_pixels": int(mask.sum()),
+    }
+
+
+def flicker(turntable: Turntable, angles: list[float], spp: int, reference_spp: int,
+            denoise: bool = False) -> dict[str, float]:
+    """Frame-to-frame flicker of each seeding policy over ``angles``: the
+    mean absolute difference between consecutive frames' changes and the
+    changes of ``reference_spp`` renders of the same poses (what the motion
+    itself changes), relative to the mean of the references."""
+    denoiser = Denoiser("oidn") if denoise else None
+
+    def frame(angle: float, seed: int, count: int) -> np.ndarray:
+        image = turntable.render(angle, spp=count, seed=seed)
+        if denoiser is None:
+            return image[..., :3]
+        return denoiser(image[..., :3], image[..., 3:6], image[..., 6:9])
+
+    reference = np.stack([turntable.render(a, spp=reference_spp, seed=99)[..., :3] for a in angles])
+    motion = np.diff(reference, axis=0)
+    result = {}
+    for policy in ("frame", "same"):
+        frames = np.stack([frame(a, k if policy == "frame" else 0, spp) for k, a in enumerate(angles)])
+        result[policy] = float(np.abs(np.diff(frames, axis=0) - motion).mean() / reference.mean())
+    return result
+
+
+def run_bench(argv: list[str] | None = None) -> None:
+    """``scripts/bench_turntable.py``: print the frame times, the masked
+    denoise errors and the flicker of both seeding policies."""
+    from ..cli.common import select_variant
+    from .denoise import box_filter_xml
+    from .scenes import load_string_in, set_film_size
+
+    args = bench_parser().parse_args(argv)
+    defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
+    select_variant(args.variant)
+    times = frame_times(args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    print(f"per frame, {args.resolution}x{args.resolution} {args.spp} spp ({args.variant}): lathe-turntable "
+          f"{times['turntable_s'] * 1e3:.1f} ms, bare mi.render {times['render_s'] * 1e3:.1f} ms, "
+          f"ratio {times['ratio']:.2f}")
+    job = (args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    times = frame_times(*job, ["--denoise"])
+    print(f"  with --denoise: {times['turntable_s'] * 1e3:.1f} ms per frame, ratio {times['ratio']:.2f}")
+    with open(args.scene, encoding="utf-8") as f:
+        text = set_film_size(box_filter_xml(f.read()), (args.resolution, args.resolution))
+    folder = os.path.dirname(os.path.abspath(args.scene))
+    values = dict(d.split("=", 1) for d in defines)
+    turntable = Turntable(load_string_in(folder, text, **values), guides=True)
+    print("relative error on the glass pixels against", args.reference_spp, "spp (box filter):")
+    for name, value in denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp).items():
+        print(f"  {name}: {value:.4f}" if isinstance(value, float) else f"  {name}: {value}")
+    world = Turntable(load_string_in(folder, text, **values), "world", guides=True)
+    angles = [2.0 * k for k in range(8)]
+    for denoise in (False, True):
+        result = flicker(world, angles, args.spp, args.high_spp, denoise)
+        print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
+              + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
+
+
+def bench_parser() -> argparse.ArgumentParser:
+    """Options of ``scripts/bench_turntable.py``."""
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--scene", default="scenes/wine_glass.xml")
+    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--resolution", type=int, default=128)
+    parser.add_argument("--frames", type=int, default=8, help="frames of the timing run (default: 8)")
+    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--high-spp", type=int, default=256)
+    parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("-D", dest="defines", action="append", default=None, metavar="KEY=VALUE",
+                        help="XML defaults (default: integrator=lathe_path, max_depth=8)")
+    return parser
