@@ -40,16 +40,17 @@ BSPLINE_SAMPLES_PER_SEGMENT = 48
 BYTES_PER_POINT = 600
 
 
-def check_point_count(points: int, source: str, what: str = "points", per_point: int = 1) -> None:
-    """Raise :class:`ProfileError` when ``points`` (each standing for
-    ``per_point`` profile points, e.g. curve samples per B-spline control
-    point) exceed :data:`MAX_PROFILE_POINTS`; the message names the count and
-    the memory it would take."""
+def check_point_count(points: int, source: str, what: str = "points", per_point: int = 1,
+                      error: type[ProfileError] = ProfileError) -> None:
+    """Raise ``error`` (a :class:`ProfileError`) when ``points`` (each
+    standing for ``per_point`` profile points, e.g. curve samples per
+    B-spline control point) exceed :data:`MAX_PROFILE_POINTS`; the message
+    names the count and the memory it would take."""
     total = points * per_point
     if total > MAX_PROFILE_POINTS:
         gigabytes = total * BYTES_PER_POINT / 1e9
         extra = f" ({total:,} curve samples)" if per_point > 1 else ""
-        raise ProfileError(
+        raise error(
             f"{source}: {points:,} {what}{extra} is too large: validating it would take about "
             f"{gigabytes:.1f} GB; at most {MAX_PROFILE_POINTS // per_point:,} {what} are supported"
         )
