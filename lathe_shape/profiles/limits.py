@@ -41,16 +41,18 @@ BYTES_PER_POINT = 600
 
 
 def check_point_count(points: int, source: str, what: str = "points", per_point: int = 1,
-                      error: type[ProfileError] = ProfileError) -> None:
+                      error: type[ProfileError] = ProfileError, at_least: bool = False) -> None:
     """Raise ``error`` (a :class:`ProfileError`) when ``points`` (each
     standing for ``per_point`` profile points, e.g. curve samples per
     B-spline control point) exceed :data:`MAX_PROFILE_POINTS`; the message
-    names the count and the memory it would take."""
+    names the count (``at_least``: a reader stopped counting there) and the
+    memory it would take."""
     total = points * per_point
-    if total > MAX_PROFILE_POINTS:
-        gigabytes = total * BYTES_PER_POINT / 1e9
-        extra = f" ({total:,} curve samples)" if per_point > 1 else ""
-        raise error(
-            f"{source}: {points:,} {what}{extra} is too large: validating it would take about "
-            f"{gigabytes:.1f} GB; at most {MAX_PROFILE_POINTS // per_point:,} {what} are supported"
-        )
+    if total <= MAX_PROFILE_POINTS:
+        return
+    count = f"{'at least ' if at_least else ''}{points:,} {what}"
+    if per_point > 1:
+        count += f" ({total:,} curve samples)"
+    raise error(f"{source}: {count} is too many: validating them would take about "
+                f"{total * BYTES_PER_POINT / 1e9:.1f} GB; at most "
+                f"{MAX_PROFILE_POINTS // per_point:,} {what} are supported")

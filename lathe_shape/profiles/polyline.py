@@ -30,6 +30,7 @@ string, CSV file or arc spec); :func:`parse_profile_string` and
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,7 @@ from .crossings import first_crossing, touch_tolerance
 from .errors import ProfileError
 from .limits import MAX_COORDINATE, check_point_count
 from .sources import parse_profile_string, read_profile_csv
+from .text import PointLabels
 
 __all__ = [
     "ProfileError",
@@ -99,7 +101,7 @@ class Profile:
 def make_profile(
     points: np.ndarray,
     sharp: np.ndarray | None = None,
-    labels: list[str] | None = None,
+    labels: Sequence[str] | None = None,
     source: str = "profile",
     crease_angle: float = 30.0,
 ) -> Profile:
@@ -120,7 +122,7 @@ def make_profile(
     check_point_count(len(pts), source)
     flags = np.zeros(len(pts), dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
     if labels is None:
-        labels = [f"{source}, point {k + 1}" for k in range(len(pts))]
+        labels = PointLabels.counting(source, len(pts))
     if not math.isfinite(crease_angle) or not 0.0 <= crease_angle <= 180.0:
         raise ProfileError(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
@@ -156,7 +158,7 @@ def make_profile(
     )
 
 
-def _check_coordinates(pts: np.ndarray, labels: list[str]) -> None:
+def _check_coordinates(pts: np.ndarray, labels: Sequence[str]) -> None:
     """Every point finite, within :data:`.limits.MAX_COORDINATE`, with a
     radius >= 0."""
     bad = ~np.isfinite(pts).all(axis=1)
@@ -195,7 +197,7 @@ def _closed_chain(pts: np.ndarray, flags: np.ndarray, source: str) -> tuple[np.n
     return pts, flags, closed_loop
 
 
-def _check_segment_lengths(pts: np.ndarray, labels: list[str], closed_loop: bool) -> None:
+def _check_segment_lengths(pts: np.ndarray, labels: Sequence[str], closed_loop: bool) -> None:
     """No two consecutive points equal (zero-length segment)."""
     n = len(pts)
     nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
@@ -254,7 +256,7 @@ def _collinear(pts: np.ndarray, tol: float) -> bool:
     return length == 0.0 or bool(np.all(np.abs(cross) <= tol * length))
 
 
-def _check_simple(pts: np.ndarray, labels: list[str], source: str, tol: float) -> None:
+def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: float) -> None:
     """Raise if the closed polygon folds back at a vertex (an edge runs back
     over the previous one) or if two non-adjacent edges come within ``tol``
     of each other (:func:`.crossings.first_crossing`)."""
