@@ -55,65 +55,88 @@ def first_crossing(points: np.ndarray, closed: bool, tol: float) -> tuple[int, i
     chain also has the edge ``n - 1`` from ``points[n - 1]`` back to
     ``points[0]``.
     """
-    a = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    b = np.roll(a, -1, axis=0) if closed else a[1:]
-    a = a[: len(b)]
+    chain = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if closed:
+        chain = np.concatenate([chain, chain[:1]])
+    a, b = chain[:-1], chain[1:]
     m = len(a)
     if m < 3:
         return None
-    levels = _box_levels(a, b, tol)
+    levels = [_Boxes.of_nodes(chain, 1 << level, tol) for level in range(max(1, (m - 1).bit_length()) + 1)]
     best = m * m  # code i * m + j of the lowest touching pair found (m * m: none)
-    top = len(levels) - 1
-    stack = [(top, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64))]
+    stack = [(len(levels) - 1, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64))]
     while stack:
         level, first, second = stack.pop()
         if level == 0:
             best = min(best, _lowest_touching(a, b, first, second, closed, tol, best))
             continue
-        first, second = _overlapping_children(levels, level, first, second, m, best)
+        first, second = _overlapping_children(levels[level - 1], level - 1, first, second, m, best)
         # Chunks, the lowest edge indices on top of the stack (depth first).
         for start in range((len(first) - 1) // _CHUNK * _CHUNK, -1, -_CHUNK):
             stack.append((level - 1, first[start:start + _CHUNK], second[start:start + _CHUNK]))
     return None if best == m * m else (best // m, best % m)
 
 
-def _box_levels(a: np.ndarray, b: np.ndarray, pad: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per level, the (lo, hi) corners of every node's box: level 0 the
-    edges (grown by ``pad``), level ``L + 1`` the union of node pairs of
-    level ``L``, up to a single root."""
-    lo, hi = np.minimum(a, b) - pad, np.maximum(a, b) + pad
-    levels = [(lo, hi)]
-    while len(lo) > 1:
-        if len(lo) % 2:  # an odd last node is its own parent
-            lo, hi = np.concatenate([lo, lo[-1:]]), np.concatenate([hi, hi[-1:]])
-        lo = np.minimum(lo[0::2], lo[1::2])
-        hi = np.maximum(hi[0::2], hi[1::2])
-        levels.append((lo, hi))
-    return levels
+class _Boxes:
+    """Oriented boxes of the nodes of one level: node ``k`` holds the chain
+    points ``k size .. (k+1) size`` (its edges). Each box is aligned with its
+    node's chord (first to last point), so that a run of nearly parallel
+    edges, or a comb of long thin teeth at any angle, gets a thin box;
+    ``center + s axis + t normal`` for ``|s| <= half_length``,
+    ``|t| <= half_width``."""
+
+    def __init__(self, center: np.ndarray, axis: np.ndarray, half: np.ndarray) -> None:
+        self.center, self.axis, self.half = center, axis, half
+
+    @classmethod
+    def of_nodes(cls, chain: np.ndarray, size: int, pad: float) -> _Boxes:
+        last = len(chain) - 1
+        count = -(-last // size)
+        index = np.minimum(np.arange(count)[:, None] * size + np.arange(size + 1), last)
+        pts = chain[index]  # (count, size + 1, 2)
+        chord = pts[:, -1] - pts[:, 0]
+        length = np.hypot(chord[:, 0], chord[:, 1])
+        closed_node = length == 0.0  # a whole loop: fall back to the r, z axes
+        axis = np.where(closed_node[:, None], [1.0, 0.0], chord / np.where(closed_node, 1.0, length)[:, None])
+        normal = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+        s = np.einsum("kpi,ki->kp", pts, axis)
+        t = np.einsum("kpi,ki->kp", pts, normal)
+        s_lo, s_hi, t_lo, t_hi = s.min(axis=1), s.max(axis=1), t.min(axis=1), t.max(axis=1)
+        center = 0.5 * ((s_lo + s_hi)[:, None] * axis + (t_lo + t_hi)[:, None] * normal)
+        half = 0.5 * np.stack([s_hi - s_lo, t_hi - t_lo], axis=1) + pad
+        return cls(center, axis, half)
+
+    def overlap(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Whether boxes ``i[k]`` and ``j[k]`` overlap: no separating axis
+        among the four box axes (separating axis theorem)."""
+        d = self.center[j] - self.center[i]
+        ua, ub = self.axis[i], self.axis[j]
+        va, vb = np.stack([-ua[:, 1], ua[:, 0]], 1), np.stack([-ub[:, 1], ub[:, 0]], 1)
+        ha, hb = self.half[i], self.half[j]
+        apart = np.zeros(len(i), dtype=bool)
+        for w in (ua, va, ub, vb):
+            reach = (ha[:, 0] * np.abs(_dot(ua, w)) + ha[:, 1] * np.abs(_dot(va, w))
+                     + hb[:, 0] * np.abs(_dot(ub, w)) + hb[:, 1] * np.abs(_dot(vb, w)))
+            apart |= np.abs(_dot(d, w)) > reach
+        return ~apart
 
 
 def _overlapping_children(
-    levels: list[tuple[np.ndarray, np.ndarray]],
-    level: int,
-    first: np.ndarray,
-    second: np.ndarray,
-    m: int,
-    best: int,
+    boxes: _Boxes, level: int, first: np.ndarray, second: np.ndarray, m: int, best: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The child node pairs (one level down) of the node pairs ``first[k] <=
-    second[k]`` whose boxes overlap and that could still hold a pair of
-    edges lower than ``best``; sorted by their lowest possible pair."""
-    lo, hi = levels[level - 1]
-    count = len(lo)
+    """The child node pairs (at ``level``, with ``boxes``) of the node pairs
+    ``first[k] <= second[k]`` one level up whose boxes overlap and that could
+    still hold a pair of edges lower than ``best``; sorted by their lowest
+    possible pair."""
+    count = len(boxes.center)
     ca = (2 * first[:, None] + np.array([0, 0, 1, 1])).ravel()
     cb = (2 * second[:, None] + np.array([0, 1, 0, 1])).ravel()
     keep = (ca <= cb) & (cb < count)
     ca, cb = ca[keep], cb[keep]
-    other = ca != cb  # a node always overlaps itself
-    overlap = np.all((lo[ca] <= hi[cb]) & (lo[cb] <= hi[ca]), axis=1)
-    shift = level - 1
-    lowest = (ca << shift) * m + (cb << shift)  # no pair of edges below this
-    keep = (~other | overlap) & (lowest < best)
+    lowest = (ca << level) * m + (cb << level)  # no pair of edges below this
+    keep = lowest < best
+    ca, cb, lowest = ca[keep], cb[keep], lowest[keep]
+    keep = (ca == cb) | boxes.overlap(ca, cb)  # a node always overlaps itself
     order = np.argsort(lowest[keep], kind="stable")
     return ca[keep][order], cb[keep][order]
 
