@@ -171,28 +171,30 @@ def _touching(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray, to
     both sides of the other's line), or an end point within ``tol`` of the
     other segment (touching, or overlapping collinear segments)."""
     r, s = p1 - p0, q1 - q0
-    len_r, len_s = np.hypot(r[:, 0], r[:, 1]), np.hypot(s[:, 0], s[:, 1])
     # Orientation tests; d / |r| is the signed distance from the line of r.
     d1, d2 = _cross(r, q0 - p0), _cross(r, q1 - p0)
     d3, d4 = _cross(s, p0 - q0), _cross(s, p1 - q0)
-    e_r, e_s = tol * len_r, tol * len_s
+    e_r = tol * np.hypot(r[:, 0], r[:, 1])
+    e_s = tol * np.hypot(s[:, 0], s[:, 1])
     straddle = (((d1 > e_r) & (d2 < -e_r)) | ((d1 < -e_r) & (d2 > e_r))) & (
         ((d3 > e_s) & (d4 < -e_s)) | ((d3 < -e_s) & (d4 > e_s))
     )
-
-    def near(d: np.ndarray, e: np.ndarray, start: np.ndarray, vec: np.ndarray, length: np.ndarray,
-             point: np.ndarray) -> np.ndarray:
-        # Within tol of the line, and its projection within tol of the segment.
-        along = _dot(point - start, vec)
-        return (np.abs(d) <= e) & (along >= -e) & (along <= length * length + e)
-
     return (
         straddle
-        | near(d1, e_r, p0, r, len_r, q0)
-        | near(d2, e_r, p0, r, len_r, q1)
-        | near(d3, e_s, q0, s, len_s, p0)
-        | near(d4, e_s, q0, s, len_s, p1)
+        | (_distance_to_segment(q0, p0, r) <= tol)
+        | (_distance_to_segment(q1, p0, r) <= tol)
+        | (_distance_to_segment(p0, q0, s) <= tol)
+        | (_distance_to_segment(p1, q0, s) <= tol)
     )
+
+
+def _distance_to_segment(point: np.ndarray, start: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Distance from ``point`` to the segment ``start -> start + vec`` (a
+    point when ``vec`` is zero)."""
+    length_sq = _dot(vec, vec)
+    along = _dot(point - start, vec) / np.where(length_sq > 0.0, length_sq, 1.0)
+    offset = start + np.clip(along, 0.0, 1.0)[:, None] * vec - point
+    return np.hypot(offset[:, 0], offset[:, 1])
 
 
 def meeting_parameters(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> tuple[float, float]:
