@@ -269,3 +269,37 @@ def test_cli_converts(tmp_path, capsys):
     spline.write_text("0,0\n1,0\n1,1\n0,2\n")
     code, out = run_cli([spline, "--kind", "bspline", "--to-polyline", 20000, "-o", tmp_path / "out"], capsys)
     assert code == 0 and (tmp_path / "out" / "s_20000.csv").exists()
+
+
+def test_toml_spec_with_bom(tmp_path):
+    path = tmp_path / "glass.toml"
+    path.write_bytes(b"\xef\xbb\xbfstart = [0.0, 0.0]\n[[base]]\nline = { to = [1.0, 0.0] }\n"
+                     b"[[base]]\nline = { to = [1.0, 1.0] }\n[[base]]\nline = { to = [0.0, 1.0] }\n")
+    assert len(load_profile_spec(path)[0]) == 4
+    path.write_bytes(b"start = [0.0, 0.0]\n# caf\xe9\n")
+    with pytest.raises(ProfileError, match=r"glass\.toml, line 2: not UTF-8 text \(byte 0xe9 at column 6\)"):
+        load_profile_spec(path)
+
+
+def _scaled_spec(value, scale):
+    """An arc spec with every length multiplied by ``scale``."""
+    if isinstance(value, dict):
+        return {key: (_scaled_spec(v, scale) if key not in ("start", "to", "center", "length", "radius",
+                                                            "thickness") else np.multiply(v, scale).tolist())
+                for key, v in value.items()}
+    if isinstance(value, list):
+        return [_scaled_spec(v, scale) for v in value]
+    return value
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e6])
+def test_arc_specs_scale(scale):
+    from test_arc_profile import SPEC
+
+    from lathe_shape.profiles import build_from_spec
+
+    reference, sharp = build_from_spec(SPEC)
+    scaled, scaled_sharp = build_from_spec(_scaled_spec(SPEC, scale))
+    np.testing.assert_allclose(scaled, reference * scale, rtol=1e-9, atol=1e-12 * scale)
+    assert np.array_equal(sharp, scaled_sharp)
+    make_profile(scaled, scaled_sharp)

@@ -35,8 +35,9 @@ MAX_COORDINATE = 1e18
 #: self-intersection and regularity checks examine.
 BSPLINE_SAMPLES_PER_SEGMENT = 48
 
-#: Estimated peak memory per point of validating a polyline profile and
-#: building its buffers (bytes; measured peak of the validation, rounded up).
+#: Estimated peak memory per point of reading and validating a profile
+#: (bytes): the validation of a polyline peaks at about 300 bytes per point;
+#: the rest is margin for the reader and the caller's copies.
 BYTES_PER_POINT = 600
 
 
