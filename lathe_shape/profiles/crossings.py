@@ -10,16 +10,20 @@ plus the closing edge ``q_(n-1) -> q_0`` when the chain is closed. Two
 adjacent edges share a vertex by construction and are never reported here
 (a fold back onto the previous edge is the caller's own test).
 
-Method. A bounding-box hierarchy over the *chain order*: node ``k`` of level
+Method. A hierarchy of boxes over the *chain order*: node ``k`` of level
 ``L`` bounds the edges ``k 2^L .. (k+1) 2^L - 1``, which lie close together
-because consecutive edges of a curve do. The hierarchy is traversed against
-itself one level at a time, keeping only the node pairs whose boxes overlap,
-so that the exact orientation tests run on nearby edge pairs only: time and
-memory grow like ``n log n`` for a curve whose distant parts do not overlap
-in their boxes (every sane profile). Node pairs are expanded in chunks of
+because consecutive edges of a curve do. Each box is aligned with its node's
+chord, so that a run of nearly straight edges, or a comb of long thin teeth
+at any angle, gets a thin box. The hierarchy is traversed against itself one
+level at a time, keeping only the node pairs whose boxes overlap (separating
+axis test), so that the exact orientation tests run on nearby edge pairs
+only: time and memory grow like ``n log n`` when far-apart parts of the
+curve have disjoint boxes (every sane profile; time grows with the number of
+overlapping box pairs otherwise). Node pairs are expanded in chunks of
 bounded size, depth first, lowest edge indices first, so that memory stays
-bounded whatever the input; once a touching pair is found, pairs that cannot
-give a lower one are dropped, so a self-intersecting chain is refused early.
+bounded whatever the input; once a touching pair is found, node pairs that
+cannot hold a lower one are dropped, so a self-intersecting chain is refused
+early and the pair reported is the lowest.
 """
 
 from __future__ import annotations
@@ -62,9 +66,11 @@ def first_crossing(points: np.ndarray, closed: bool, tol: float) -> tuple[int, i
     m = len(a)
     if m < 3:
         return None
-    levels = [_Boxes.of_nodes(chain, 1 << level, tol) for level in range(max(1, (m - 1).bit_length()) + 1)]
+    # Levels 0 (the edges) .. top (a single node holding every edge).
+    top = max(1, (m - 1).bit_length())
+    levels = [_Boxes.of_nodes(chain, 1 << level, tol) for level in range(top + 1)]
     best = m * m  # code i * m + j of the lowest touching pair found (m * m: none)
-    stack = [(len(levels) - 1, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64))]
+    stack = [(top, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64))]
     while stack:
         level, first, second = stack.pop()
         if level == 0:

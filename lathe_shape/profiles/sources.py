@@ -12,8 +12,12 @@ that :func:`lathe_shape.profiles.polyline.make_profile` and
 * a ``.json``/``.toml`` arc spec (:mod:`lathe_shape.profiles.arcs`: lines and
   equally divided arcs, paper section 2.3).
 
-``labels[k]`` names point ``k`` (file and line, or parameter and position)
-in error messages. :func:`format_profile_csv` / :func:`write_profile_csv`
+Files are UTF-8 text (a byte order mark is accepted; other bytes are
+refused naming the line and column). Numbers are plain decimal or scientific
+numbers (``10``, ``-0.5``, ``1e-3``): Python's ``1_0`` or non-ASCII digits are
+refused; ``inf`` and ``nan`` are read and then refused by the validation as
+non-finite. ``labels[k]`` names point ``k`` (file and line, or parameter and
+position) in error messages. :func:`format_profile_csv` / :func:`write_profile_csv`
 are the one CSV writer (the inverse of :func:`read_profile_csv`).
 """
 
