@@ -16,7 +16,11 @@ import sys
 
 from .common import CliError, run_command
 
-__all__ = ["main", "build_parser"]
+__all__ = ["MAX_POLYLINE_POINTS", "main", "build_parser"]
+
+#: Most points ``--to-polyline`` writes (the polyline is validated as a
+#: profile, and written as text: a million points is about 20 MB of CSV).
+MAX_POLYLINE_POINTS = 1_000_000
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--crease-angle", type=float, default=30.0,
                         help="crease angle in degrees (default 30)")
     parser.add_argument("--to-polyline", type=int, metavar="N",
-                        help="B-spline only: write a polyline of N points of the same curve")
+                        help="B-spline only: write a polyline of N points of the same curve "
+                             f"(3 <= N <= {MAX_POLYLINE_POINTS:,})")
     parser.add_argument("--method", choices=("uniform", "adaptive"), default="adaptive",
                         help="point placement for --to-polyline: uniform in t, or curvature-adaptive "
                              "(nearly constant turning angle, the paper's advice; default)")
@@ -72,6 +77,9 @@ def convert(args: argparse.Namespace, spline) -> int:
 
     if args.to_polyline < 3:
         raise CliError(f"--to-polyline needs at least 3 points, got {args.to_polyline}")
+    if args.to_polyline > MAX_POLYLINE_POINTS:
+        raise CliError(f"--to-polyline must be at most {MAX_POLYLINE_POINTS:,} points, "
+                       f"got {args.to_polyline:,}")
     polyline = to_polyline(spline.segment_controls, args.to_polyline, args.method)
     # The result must itself be a valid polyline profile.
     make_profile(polyline, source=f"polyline of {args.input}")
@@ -89,6 +97,22 @@ def convert(args: argparse.Namespace, spline) -> int:
 
 
 def check_profile(args: argparse.Namespace) -> int:
+    """The command: :func:`check_or_convert`, with no traceback whatever the
+    input (profile errors are ValueErrors, which :func:`run_command` reports;
+    running out of memory or an arithmetic overflow is reported here)."""
+    try:
+        return check_or_convert(args)
+    except MemoryError:
+        raise CliError(f"{args.input}: out of memory (the profile, or the --to-polyline "
+                       f"point count, is too large for this machine)") from None
+    except (CliError, ValueError, RuntimeError, OSError):
+        raise
+    except Exception as e:  # a bug; still a one-line message, naming the input
+        raise CliError(f"{args.input}: unexpected {type(e).__name__}: {e}") from None
+
+
+def check_or_convert(args: argparse.Namespace) -> int:
+    """Validate the profile and print its summary, or convert it."""
     from ..profiles import make_bspline_profile, read_points
 
     points, sharp, labels = read_points(args.input)

@@ -5,12 +5,23 @@
   arc spec) and the CSV writer;
 * :mod:`.polyline` -- the validated polyline :class:`Profile` (Method 1);
 * :mod:`.bspline` -- the validated :class:`BSplineProfile` (Method 2);
-* :mod:`.arcs` -- profiles from lines and equally divided arcs (section 2.3).
+* :mod:`.arcs` -- profiles from lines and equally divided arcs (section 2.3);
+* :mod:`.crossings` -- the one segment-intersection test both profile kinds
+  use (``n log n``);
+* :mod:`.limits` -- the most points and the largest coordinates a profile
+  may have;
+* :mod:`.text` -- UTF-8 decoding of profile files and the point labels of
+  error messages.
+
+Every check's tolerance is relative to the profile's own size: a profile
+scaled by any factor (within :data:`.limits.MAX_COORDINATE`) is accepted or
+refused alike.
 """
 
 from .arcs import build_from_spec, load_profile_spec, spec_with_step
 from .bspline import BSplineError, BSplineProfile, make_bspline_profile
 from .errors import ProfileError
+from .limits import MAX_COORDINATE, MAX_PROFILE_POINTS
 from .polyline import Profile, make_profile
 from .sources import (
     format_profile_csv,
@@ -21,6 +32,8 @@ from .sources import (
 )
 
 __all__ = [
+    "MAX_COORDINATE",
+    "MAX_PROFILE_POINTS",
     "BSplineError",
     "BSplineProfile",
     "Profile",

@@ -83,6 +83,8 @@ from typing import Any
 import numpy as np
 
 from .errors import ProfileError
+from .limits import MAX_COORDINATE, MAX_PROFILE_POINTS, check_point_count
+from .text import PointLabels, decode_utf8
 
 __all__ = [
     "ArcPiece",
@@ -97,8 +99,14 @@ __all__ = [
 
 #: Default maximum angle step of an equally divided arc (degrees).
 DEFAULT_STEP_DEG = 7.5
-#: Relative tolerance for "lies on the axis" and tangent continuity checks.
+#: Relative tolerance for "lies on the axis" and tangent continuity checks
+#: (relative to the size of the coordinates: a scaled spec builds alike).
 _TOL = 1e-9
+
+
+def _size(points: np.ndarray) -> float:
+    """The largest coordinate magnitude: the scale of the tolerances."""
+    return float(np.abs(points).max())
 
 
 def _unit(angle: float) -> np.ndarray:
@@ -193,6 +201,7 @@ class ArcProfileBuilder:
         self.heading = _unit(math.radians(heading_deg))
         self.max_step_deg = float(max_step_deg)
         self.pieces: list[Piece] = []
+        self.point_count = 1  # points of the profile so far
         self.start_sharp = False
         if not self.max_step_deg > 0.0:
             raise ProfileError(f"{source}: max_step_deg must be > 0, got {max_step_deg}")
@@ -204,16 +213,23 @@ class ArcProfileBuilder:
 
     def _count(self, sweep_rad: float, segments: int | None, step_deg: float | None, where: str) -> int:
         if segments is not None:
-            if int(segments) != segments or segments < 1:
-                raise ProfileError(f"{where}: 'segments' must be a positive integer, got {segments!r}")
+            if int(segments) != segments or segments < 1 or segments > MAX_PROFILE_POINTS:
+                raise ProfileError(f"{where}: 'segments' must be a positive integer, at most "
+                                   f"{MAX_PROFILE_POINTS:,}, got {segments!r}")
             return int(segments)
         step = self.max_step_deg if step_deg is None else float(step_deg)
         if not step > 0.0:
             raise ProfileError(f"{where}: 'max_step_deg' must be > 0, got {step_deg!r}")
-        return max(1, math.ceil(abs(math.degrees(sweep_rad)) / step - 1e-9))
+        parts = abs(math.degrees(sweep_rad)) / step - 1e-9
+        if parts > MAX_PROFILE_POINTS:
+            raise ProfileError(f"{where}: 'max_step_deg' {step:g} divides the arc into more than "
+                               f"{MAX_PROFILE_POINTS:,} parts (the most points of a profile)")
+        return max(1, math.ceil(parts))
 
     def add(self, piece: Piece) -> ArcProfileBuilder:
         """Append a ready piece (its start must be the current point)."""
+        self.point_count += piece.n
+        check_point_count(self.point_count, self.source)
         self.pieces.append(piece)
         self.heading = piece.heading_end()
         return self
@@ -230,7 +246,7 @@ class ArcProfileBuilder:
             p1 = np.asarray(to, dtype=np.float64).reshape(2)
         else:
             p1 = p0 + float(length) * self.heading
-        if not np.all(np.isfinite(p1)) or np.linalg.norm(p1 - p0) <= _TOL * max(1.0, np.abs(p0).max()):
+        if not np.all(np.isfinite(p1)) or np.linalg.norm(p1 - p0) <= _TOL * _size([p0, p1]):
             raise ProfileError(f"{where}: a line needs a finite end point different from its start "
                                f"({p0[0]:g}, {p0[1]:g})")
         n = self._count(0.0, segments, None, where)
@@ -263,7 +279,7 @@ class ArcProfileBuilder:
         else:
             c = np.asarray(center, dtype=np.float64).reshape(2)
             R = float(np.linalg.norm(p0 - c))
-            if not (math.isfinite(R) and R > _TOL * max(1.0, np.abs(p0).max())):
+            if not (math.isfinite(R) and R > _TOL * _size([p0, c])):
                 raise ProfileError(f"{where}: 'center' ({c[0]:g}, {c[1]:g}) must differ from the "
                                    f"arc's start point ({p0[0]:g}, {p0[1]:g})")
             if (sweep_deg is None) == (end_angle_deg is None):
@@ -292,8 +308,7 @@ class ArcProfileBuilder:
             pts.append(p)
             sharp += [False] * (len(p) - 1) + [piece.sharp_end]
         points = np.concatenate(pts)
-        scale = max(1.0, float(np.abs(points).max()))
-        points[np.abs(points) < 1e-12 * scale] = 0.0  # clean round-off on the axis / z = 0
+        points[np.abs(points) < 1e-12 * _size(points)] = 0.0  # clean round-off on the axis / z = 0
         return points, np.array(sharp, dtype=bool)
 
 
@@ -308,11 +323,21 @@ _ARC_KEYS = {"radius", "center", "sweep", "end_angle", "segments", "max_step_deg
 
 
 def _number(value: Any, where: str, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ProfileError(f"{where}: expected a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not abs(value) < math.inf:
+        raise ProfileError(f"{where}: expected a finite number, got {_short(value)}")
+    if not abs(value) < MAX_COORDINATE:  # also an int too large for a float
+        raise ProfileError(f"{where}: must be below {MAX_COORDINATE:g} in magnitude, got {_short(value)}")
     if positive and value <= 0:
         raise ProfileError(f"{where}: must be > 0, got {value!r}")
     return float(value)
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, cut short (a spec may hold a huge number or list)."""
+    if isinstance(value, int) and abs(value) >= 10**30:
+        return f"an integer of {value.bit_length()} bits"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _point(value: Any, where: str) -> tuple[float, float]:
@@ -429,7 +454,7 @@ def build_from_spec(spec: dict, source: str = "arc profile spec") -> tuple[np.nd
             _add_element(b, element, f"bottom[{k}]")
 
     points, sharp = b.arrays()
-    scale = max(1.0, float(np.abs(points).max()))
+    scale = _size(points)
     if abs(points[-1, 0]) < 1e-9 * scale:
         points[-1, 0] = 0.0
     if np.linalg.norm(points[-1] - points[0]) < 1e-9 * scale:
@@ -484,7 +509,7 @@ def _add_bottom(b: ArcProfileBuilder, bottom: Any, first_wall: Piece) -> None:
     """Take the inner wall to the axis (see the module docstring)."""
     where = f"{b.source}: bottom"
     p = b.last
-    scale = max(1.0, float(np.abs(p).max()))
+    scale = _size(b.arrays()[0])
     if isinstance(bottom, list):
         for k, element in enumerate(bottom):
             _add_element(b, element, f"bottom[{k}]")
@@ -547,30 +572,35 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
     """
     path = os.fspath(path)
     points, sharp = build_from_spec(read_profile_spec(path), source=path)
-    labels = [f"{path}, point {k + 1}" for k in range(len(points))]
+    labels = PointLabels.counting(path, len(points))
     return points, sharp, labels
+
+
+#: Largest spec file read (bytes): a spec is a few lines of lines and arcs.
+MAX_SPEC_BYTES = 1 << 24
 
 
 def read_profile_spec(path: str | os.PathLike) -> Any:
     """The spec in a JSON (``.json``) or TOML (``.toml``) file, unchecked
-    (:func:`build_from_spec` checks it)."""
+    (:func:`build_from_spec` checks it). UTF-8 text, a byte order mark
+    accepted, at most :data:`MAX_SPEC_BYTES`."""
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            data = f.read(MAX_SPEC_BYTES + 1)
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile spec ({e.strerror})") from None
-    if path.lower().endswith(".toml"):
+    if len(data) > MAX_SPEC_BYTES:
+        raise ProfileError(f"{path}: a profile spec must be at most {MAX_SPEC_BYTES:,} bytes")
+    text = decode_utf8(data, path)
+    toml = path.lower().endswith(".toml")
+    if toml:
         try:
             import tomllib
         except ImportError:  # Python < 3.11
             raise ProfileError(f"{path}: TOML profile specs need Python >= 3.11 (tomllib); "
                                f"use JSON instead") from None
-        try:
-            return tomllib.loads(data.decode("utf-8"))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise ProfileError(f"{path}: not a valid TOML file ({e})") from None
     try:
-        return json.loads(data.decode("utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ProfileError(f"{path}: not a valid JSON file ({e})") from None
+        return tomllib.loads(text) if toml else json.loads(text)
+    except (ValueError, RecursionError) as e:  # the decode errors are ValueErrors
+        raise ProfileError(f"{path}: not a valid {'TOML' if toml else 'JSON'} file ({e})") from None

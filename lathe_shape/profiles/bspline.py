@@ -33,6 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .crossings import first_crossing, meeting_parameters, touch_tolerance
+from .errors import ProfileError
+from .limits import BSPLINE_SAMPLES_PER_SEGMENT, MAX_COORDINATE, check_point_count
+
 __all__ = [
     "BSplineError",
     "BSplineProfile",
@@ -56,11 +60,21 @@ _BASIS = np.array([[1.0, 4.0, 1.0, 0.0],
                    [3.0, -6.0, 3.0, 0.0],
                    [-1.0, 3.0, -3.0, 1.0]]) / 6.0
 
+#: ``(b - a) / (a + b)`` (0 for ``a = b = 0``): the signed area of a segment
+#: is ``1/2 r^T W z`` for its power coefficients ``r``, ``z`` (:func:`signed_area`).
+_AREA_WEIGHTS = np.array([[(b - a) / (a + b) if a + b else 0.0 for b in range(4)] for a in range(4)])
+
+#: Most dense samples of the whole curve for ``to_polyline(method="adaptive")``.
+_DENSE_SAMPLES = 1 << 20
+
+#: Points evaluated at a time by :func:`_eval_global`.
+_EVAL_CHUNK = 1 << 16
+
 #: Samples per segment for the self-intersection and regularity checks.
-_CHECK_SAMPLES = 48
+_CHECK_SAMPLES = BSPLINE_SAMPLES_PER_SEGMENT
 
 
-class BSplineError(ValueError):
+class BSplineError(ProfileError):
     """An invalid B-spline profile; the message names the source and the problem."""
 
 
@@ -101,10 +115,16 @@ def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
     if p.ndim != 2 or p.shape[1] != 2:
         raise BSplineError(f"{source}: B-spline control points must be (r, z) pairs, "
                            f"got an array of shape {p.shape}")
+    check_point_count(len(p), source, "control points", _CHECK_SAMPLES, BSplineError)
     if not np.all(np.isfinite(p)):
         bad = int(np.argwhere(~np.all(np.isfinite(p), axis=1))[0, 0])
         raise BSplineError(f"{source}: B-spline control point {bad} is not finite: "
                            f"{p[bad].tolist()}")
+    if np.any(np.abs(p) >= MAX_COORDINATE):
+        bad = int(np.argwhere(np.any(np.abs(p) >= MAX_COORDINATE, axis=1))[0, 0])
+        raise BSplineError(f"{source}: B-spline control point {bad} is too large: {p[bad].tolist()} "
+                           f"(|r| and |z| must be below {MAX_COORDINATE:g}: their squares must fit "
+                           f"in float32)")
 
     seg, closed = _segment_controls(p, source)
     _validate_curve(seg, closed, source)
@@ -158,15 +178,25 @@ def _segments_closed(seg_ctrl: np.ndarray) -> bool:
 
 
 def _validate_curve(seg: np.ndarray, closed: bool, source: str) -> None:
-    """Geometric checks of :func:`bspline_segments` (see there)."""
-    n_seg = len(seg)
+    """Geometric checks of :func:`bspline_segments` (see there). Every
+    tolerance is relative to the curve's size, so a scaled copy of a curve
+    is accepted or refused alike."""
     scale = _scale(seg)
-    coef = power_coefficients(seg)
+    _check_axis(power_coefficients(seg), closed, 1e-9 * scale, source)
+    _check_regular(seg, closed, 1e-9 * scale, source)
+    # A curve that crosses itself can enclose no (net) area: the crossing
+    # test comes first to name it.
+    _check_self_intersection(seg, closed, source)
+    if abs(signed_area(seg)) <= 1e-12 * scale * scale:
+        raise BSplineError(f"{source}: B-spline curve encloses no area")
 
-    # Exact minimum of R(t) per segment: at t = 0, 1 or a root of R'(t).
-    # The ends of an open curve lie on the axis and are left out (with a
-    # small margin for R'(t) roots: near the ends R(t) grows like t^3).
-    tol = 1e-9 * scale
+
+def _check_axis(coef: np.ndarray, closed: bool, tol: float, source: str) -> None:
+    """The curve stays off the axis (r > tol), but for the ends of an open
+    curve: the exact minimum of R(t) per segment, at t = 0, 1 or a root of
+    R'(t). The ends of an open curve are left out (with a small margin for
+    the roots of R'(t): near the ends R(t) grows like t^3)."""
+    n_seg = len(coef)
     for i in range(n_seg):
         c = coef[i, 0]
         first_open = not closed and i == 0
@@ -191,76 +221,55 @@ def _validate_curve(seg: np.ndarray, closed: bool, source: str) -> None:
                                f"t={i + ts[k]:.4g} (segment {i}); only the ends of an open "
                                f"curve may lie on the axis")
 
-    # Regularity: the tangent may vanish only at the ends of an open curve
-    # (tripled control points); elsewhere a zero tangent is a cusp.
+
+def _check_regular(seg: np.ndarray, closed: bool, tol: float, source: str) -> None:
+    """The tangent may vanish only at the ends of an open curve (tripled
+    control points); elsewhere a tangent shorter than ``tol`` is a cusp."""
     t = np.linspace(0.0, 1.0, _CHECK_SAMPLES + 1)
-    dr, dz = derivative(seg, np.repeat(np.arange(n_seg), len(t)), np.tile(t, n_seg))
-    speed = np.hypot(dr, dz).reshape(n_seg, len(t))
+    dr, dz = _grid_values(seg, t, derivative=True)
+    speed = np.hypot(dr, dz)
     ends = np.zeros_like(speed, dtype=bool)
     if not closed:
         ends[0, :2] = True
         ends[-1, -2:] = True
-    slow = (speed <= 1e-9 * scale) & ~ends
+    slow = (speed <= tol) & ~ends
     if np.any(slow):
         i, j = np.argwhere(slow)[0]
         raise BSplineError(f"{source}: B-spline curve has a cusp (zero tangent) near "
                            f"t={i + t[j]:.4g}; avoid tripled interior control points")
 
-    area = signed_area(seg)
-    if abs(area) <= 1e-12 * scale * scale:
-        raise BSplineError(f"{source}: B-spline curve encloses no area")
 
-    _check_self_intersection(seg, closed, source)
+def _grid_values(seg: np.ndarray, t: np.ndarray, derivative: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, Z)`` (or their derivatives), each of shape (n_seg, len(t)), of
+    every segment at the same parameters ``t``: one matrix product of the
+    power coefficients, no per-sample copies of them."""
+    k = np.arange(4)[:, None]
+    if derivative:
+        powers = k * t[None, :] ** np.maximum(k - 1, 0)
+    else:
+        powers = t[None, :] ** k
+    values = power_coefficients(seg) @ powers  # (n_seg, 2, len(t))
+    return values[:, 0], values[:, 1]
 
 
 def _check_self_intersection(seg: np.ndarray, closed: bool, source: str) -> None:
-    """Dense-sampling segment-segment test for a self-intersecting curve."""
-    n_seg = len(seg)
-    t = np.linspace(0.0, 1.0, _CHECK_SAMPLES + 1)[:-1]
-    si = np.repeat(np.arange(n_seg), len(t))
-    ti = np.tile(t, n_seg)
-    r, z = evaluate(seg, si, ti)
-    pts = np.stack([r, z], axis=1)
-    param = si + ti
-    if closed:
-        pts = np.concatenate([pts, pts[:1]])
-        param = np.append(param, float(n_seg))
-    else:
-        end = np.array(evaluate(seg, n_seg - 1, 1.0)).reshape(1, 2)
-        pts = np.concatenate([pts, end])
-        param = np.append(param, float(n_seg))
-    a, b = pts[:-1], pts[1:]
-    n = len(a)
-    lo = np.minimum(a, b)
-    hi = np.maximum(a, b)
-    chunk = max(1, 4_000_000 // max(n, 1))
-    for i0 in range(0, n, chunk):
-        i = np.arange(i0, min(n, i0 + chunk))[:, None]
-        j = np.arange(n)[None, :]
-        # Only pairs that do not share an endpoint (the wrap pair of a closed
-        # curve shares one too).
-        cand = j > i + 1
-        if closed:
-            cand &= ~((i == 0) & (j == n - 1))
-        cand &= np.all(lo[j] <= hi[i], axis=2) & np.all(lo[i] <= hi[j], axis=2)
-        ii, jj = np.nonzero(cand)
-        if ii.size == 0:
-            continue
-        ii = ii + i0
-        p, pr = a[ii], b[ii] - a[ii]
-        q, qs = a[jj], b[jj] - a[jj]
-        den = pr[:, 0] * qs[:, 1] - pr[:, 1] * qs[:, 0]
-        qp = q - p
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = (qp[:, 0] * qs[:, 1] - qp[:, 1] * qs[:, 0]) / den
-            v = (qp[:, 0] * pr[:, 1] - qp[:, 1] * pr[:, 0]) / den
-        hit = (den != 0) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
-        if np.any(hit):
-            k = int(np.argmax(hit))
-            t1 = param[ii[k]] + u[k] * (param[ii[k] + 1] - param[ii[k]])
-            t2 = param[jj[k]] + v[k] * (param[jj[k] + 1] - param[jj[k]])
-            raise BSplineError(f"{source}: B-spline curve intersects itself near t={t1:.4g} "
-                               f"and t={t2:.4g} (point {(p[k] + u[k] * pr[k]).round(6).tolist()})")
+    """Self-intersection test of the curve flattened to ``_CHECK_SAMPLES``
+    chords per segment, with the polyline profiles' crossing routine
+    (:func:`.crossings.first_crossing`, ``n log n`` in the chord count)."""
+    r, z = _grid_values(seg, np.arange(_CHECK_SAMPLES) / _CHECK_SAMPLES)
+    pts = np.stack([r.ravel(), z.ravel()], axis=1)
+    if not closed:  # the curve's end point
+        pts = np.concatenate([pts, np.stack(evaluate(seg, len(seg) - 1, 1.0))[None, :]])
+    pair = first_crossing(pts, closed, touch_tolerance(pts))
+    if pair is None:
+        return
+    i, j = pair
+    m = len(pts)
+    u, v = meeting_parameters(pts[i], pts[(i + 1) % m], pts[j], pts[(j + 1) % m])
+    point = pts[i] + u * (pts[(i + 1) % m] - pts[i])
+    t1, t2 = (i + u) / _CHECK_SAMPLES, (j + v) / _CHECK_SAMPLES
+    raise BSplineError(f"{source}: B-spline curve intersects itself near t={t1:.4g} "
+                       f"and t={t2:.4g} (point {point.round(6).tolist()})")
 
 
 # ---------------------------------------------------------------------------
@@ -303,16 +312,12 @@ def signed_area(seg_ctrl: np.ndarray) -> float:
     open curve), positive when counter-clockwise in the (r right, z up) plane.
 
     Green's theorem: ``A = 1/2 sum_i int_0^1 (R Z' - Z R') dt``; the closing
-    piece along the axis has ``R = R' = 0`` and adds nothing.
+    piece along the axis has ``R = R' = 0`` and adds nothing. With
+    ``R = sum_a r_a t^a`` and ``Z = sum_b z_b t^b`` the integral is
+    ``sum_(a,b) r_a z_b (b - a) / (a + b)`` (the ``a = b = 0`` term is 0).
     """
-    P = np.polynomial.polynomial
-    total = 0.0
-    for c in power_coefficients(seg_ctrl):
-        r, z = c[0], c[1]
-        integrand = P.polysub(P.polymul(r, P.polyder(z)), P.polymul(z, P.polyder(r)))
-        anti = P.polyint(integrand)
-        total += P.polyval(1.0, anti)
-    return 0.5 * total
+    c = power_coefficients(seg_ctrl)
+    return 0.5 * float(np.einsum("ia,ab,ib->", c[:, 0], _AREA_WEIGHTS, c[:, 1]))
 
 
 def orientation_sign(seg_ctrl: np.ndarray) -> int:
@@ -466,11 +471,14 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
     n_min = 4 if closed else 3
     if n_points < n_min:
         raise BSplineError(f"to_polyline: need at least {n_min} points, got {n_points}")
+    check_point_count(n_points, "to_polyline", error=BSplineError)
     if method == "uniform":
         T = np.linspace(0.0, n_seg, n_points)
     elif method == "adaptive":
-        # Dense sampling, cumulative turning angle + arc length, inverted.
-        dense = np.linspace(0.0, n_seg, 256 * n_seg + 1)
+        # Dense sampling, cumulative turning angle + arc length, inverted;
+        # 256 samples per segment, fewer for very many segments (bounded memory).
+        per_segment = max(16, min(256, _DENSE_SAMPLES // n_seg))
+        dense = np.linspace(0.0, n_seg, per_segment * n_seg + 1)
         pts = _eval_global(seg_ctrl, dense)
         chord = np.diff(pts, axis=0)
         length = np.hypot(chord[:, 0], chord[:, 1])
@@ -495,8 +503,13 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
 
 
 def _eval_global(seg_ctrl: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """Points at global parameters ``T = seg + t`` in [0, n_seg]."""
+    """Points at global parameters ``T = seg + t`` in [0, n_seg], evaluated
+    in chunks (bounded memory for any number of points)."""
     n_seg = len(seg_ctrl)
-    i = np.minimum(np.floor(T).astype(np.int64), n_seg - 1)
-    r, z = evaluate(seg_ctrl, i, T - i)
-    return np.stack([r, z], axis=1)
+    out = np.empty((len(T), 2))
+    for start in range(0, len(T), _EVAL_CHUNK):
+        chunk = T[start:start + _EVAL_CHUNK]
+        i = np.minimum(np.floor(chunk).astype(np.int64), n_seg - 1)
+        r, z = evaluate(seg_ctrl, i, chunk - i)
+        out[start:start + len(chunk), 0], out[start:start + len(chunk), 1] = r, z
+    return out

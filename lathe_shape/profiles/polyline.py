@@ -30,12 +30,16 @@ string, CSV file or arc spec); :func:`parse_profile_string` and
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from .crossings import first_crossing, touch_tolerance
 from .errors import ProfileError
+from .limits import MAX_COORDINATE, check_point_count
 from .sources import parse_profile_string, read_profile_csv
+from .text import PointLabels
 
 __all__ = [
     "ProfileError",
@@ -97,21 +101,28 @@ class Profile:
 def make_profile(
     points: np.ndarray,
     sharp: np.ndarray | None = None,
-    labels: list[str] | None = None,
+    labels: Sequence[str] | None = None,
     source: str = "profile",
     crease_angle: float = 30.0,
 ) -> Profile:
     """Validate raw points and build the canonical clockwise :class:`Profile`.
 
     Raises :class:`ProfileError` naming ``source`` (and the offending point's
-    label) for: fewer than 3 points, non-finite values, a negative radius,
-    consecutive duplicate points, an open profile, a profile enclosing no
-    area, and a self-intersecting profile.
+    label) for: too many points (:mod:`.limits`), fewer than 3 points,
+    non-finite or too large coordinates, a negative radius, consecutive
+    duplicate points, an open profile, a self-intersecting profile, and a
+    profile enclosing no area. Every tolerance is relative to the profile's
+    own size (:func:`.crossings.touch_tolerance`), so a scaled copy of a
+    profile is accepted or refused alike.
     """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    try:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    except (TypeError, ValueError) as e:
+        raise ProfileError(f"{source}: profile points must be (r, z) pairs of numbers ({e})") from None
+    check_point_count(len(pts), source)
     flags = np.zeros(len(pts), dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
     if labels is None:
-        labels = [f"{source}, point {k + 1}" for k in range(len(pts))]
+        labels = PointLabels.counting(source, len(pts))
     if not math.isfinite(crease_angle) or not 0.0 <= crease_angle <= 180.0:
         raise ProfileError(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
@@ -120,11 +131,16 @@ def make_profile(
     pts, flags, closed_loop = _closed_chain(pts, flags, source)
     _check_segment_lengths(pts, labels, closed_loop)
 
-    # The polygon, closed along the axis when the chain is open.
-    area = _signed_area(pts)
-    if abs(area) <= 1e-12 * max(1.0, float(np.abs(pts).max()) ** 2):
+    # The polygon, closed along the axis when the chain is open. A polygon
+    # that is not a line but encloses no area crosses itself (a bow-tie):
+    # the crossing test comes before the area test to say so.
+    tol = touch_tolerance(pts)
+    if _collinear(pts, tol):
         raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
-    _check_simple(pts, labels, source)
+    _check_simple(pts, labels, source, tol)
+    area = _signed_area(pts)
+    if abs(area) <= tol * _extent(pts):
+        raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
     pts, flags, closed_loop = _canonical_chain(pts, flags, closed_loop, area)
 
     segments = _surface_segments(pts, closed_loop)
@@ -142,12 +158,18 @@ def make_profile(
     )
 
 
-def _check_coordinates(pts: np.ndarray, labels: list[str]) -> None:
-    """Every point finite, with a radius >= 0."""
+def _check_coordinates(pts: np.ndarray, labels: Sequence[str]) -> None:
+    """Every point finite, within :data:`.limits.MAX_COORDINATE`, with a
+    radius >= 0."""
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         k = int(np.argmax(bad))
         raise ProfileError(f"{labels[k]}: non-finite coordinate ({_fmt(pts[k])})")
+    huge = (np.abs(pts) >= MAX_COORDINATE).any(axis=1)
+    if huge.any():
+        k = int(np.argmax(huge))
+        raise ProfileError(f"{labels[k]}: coordinate too large ({_fmt(pts[k])}): |r| and |z| "
+                           f"must be below {MAX_COORDINATE:g} (their squares must fit in float32)")
     negative = pts[:, 0] < 0.0
     if negative.any():
         k = int(np.argmax(negative))
@@ -175,7 +197,7 @@ def _closed_chain(pts: np.ndarray, flags: np.ndarray, source: str) -> tuple[np.n
     return pts, flags, closed_loop
 
 
-def _check_segment_lengths(pts: np.ndarray, labels: list[str], closed_loop: bool) -> None:
+def _check_segment_lengths(pts: np.ndarray, labels: Sequence[str], closed_loop: bool) -> None:
     """No two consecutive points equal (zero-length segment)."""
     n = len(pts)
     nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
@@ -220,66 +242,49 @@ def _signed_area(pts: np.ndarray) -> float:
     return 0.5 * float(np.sum(r * np.roll(z, -1) - np.roll(r, -1) * z))
 
 
-def _check_simple(pts: np.ndarray, labels: list[str], source: str) -> None:
-    """Raise if any two non-adjacent edges of the closed polygon touch."""
-    n = len(pts)
-    a, b = pts, np.roll(pts, -1, axis=0)  # edge k: a[k] -> b[k]
-    # Adjacent edges can only overlap by folding back onto each other.
-    e_in, e_out = a - np.roll(a, 1, axis=0), b - a
-    cross_in_out = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
-    dot_in_out = np.einsum("ij,ij->i", e_in, e_out)
-    scale_sq = max(1.0, float(np.abs(pts).max())) ** 2
-    folds = (np.abs(cross_in_out) <= 1e-12 * scale_sq) & (dot_in_out < 0.0)
+def _extent(pts: np.ndarray) -> float:
+    """The larger side of the bounding box."""
+    return float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+
+
+def _collinear(pts: np.ndarray, tol: float) -> bool:
+    """Whether every point lies within ``tol`` of one line."""
+    offsets = pts - pts[0]
+    far = offsets[int(np.argmax(np.hypot(offsets[:, 0], offsets[:, 1])))]
+    length = float(np.hypot(*far))
+    cross = far[0] * offsets[:, 1] - far[1] * offsets[:, 0]
+    return length == 0.0 or bool(np.all(np.abs(cross) <= tol * length))
+
+
+def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: float) -> None:
+    """Raise if the closed polygon folds back at a vertex (an edge runs back
+    over the previous one) or if two non-adjacent edges come within ``tol``
+    of each other (:func:`.crossings.first_crossing`)."""
+    e_in = pts - np.roll(pts, 1, axis=0)  # edge into vertex k
+    e_out = np.roll(pts, -1, axis=0) - pts  # edge out of vertex k
+    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+    longer = np.maximum(np.hypot(e_in[:, 0], e_in[:, 1]), np.hypot(e_out[:, 0], e_out[:, 1]))
+    # The shorter edge's far end within tol of the longer one's line, going back.
+    folds = (np.abs(cross) <= tol * longer) & (np.einsum("ij,ij->i", e_in, e_out) < 0.0)
     if folds.any():
         k = int(np.argmax(folds))
         raise ProfileError(
             f"{labels[k]}: profile intersects itself: it folds back at ({_fmt(pts[k])})"
         )
-    i, j = np.triu_indices(n, k=1)
-    adjacent = (j == i + 1) | ((i == 0) & (j == n - 1))
-    i, j = i[~adjacent], j[~adjacent]
-    if len(i) == 0:
+    pair = first_crossing(pts, closed=True, tol=tol)
+    if pair is None:
         return
-    scale = float(np.abs(pts).max()) or 1.0
-    eps = 1e-12 * scale * scale
-    p, r = a[i], b[i] - a[i]
-    q, s = a[j], b[j] - a[j]
+    n = len(pts)
 
-    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    def edge_name(e: int) -> str:
+        a, b = pts[e], pts[(e + 1) % n]
+        if e == n - 1:
+            return f"closing segment ({_fmt(a)}) -> ({_fmt(b)})"
+        return f"segment ({_fmt(a)}) -> ({_fmt(b)})"
 
-    # Orientation tests: proper crossings and touching/collinear overlaps.
-    d1 = cross(r, q - p)
-    d2 = cross(r, q + s - p)
-    d3 = cross(s, p - q)
-    d4 = cross(s, p + r - q)
-    straddle = ((d1 > eps) & (d2 < -eps) | (d1 < -eps) & (d2 > eps)) & (
-        (d3 > eps) & (d4 < -eps) | (d3 < -eps) & (d4 > eps)
+    raise ProfileError(
+        f"{source}: profile intersects itself: {edge_name(pair[0])} meets {edge_name(pair[1])}"
     )
-
-    def on_segment(d: np.ndarray, start: np.ndarray, vec: np.ndarray, pt: np.ndarray) -> np.ndarray:
-        t = np.einsum("ij,ij->i", pt - start, vec) / np.einsum("ij,ij->i", vec, vec)
-        return (np.abs(d) <= eps) & (t >= 0.0) & (t <= 1.0)
-
-    touch = (
-        on_segment(d1, p, r, q)
-        | on_segment(d2, p, r, q + s)
-        | on_segment(d3, q, s, p)
-        | on_segment(d4, q, s, p + r)
-    )
-    hit = straddle | touch
-    if hit.any():
-        k = int(np.argmax(hit))
-        e1, e2 = int(i[k]), int(j[k])
-
-        def edge_name(e: int) -> str:
-            if e == n - 1:
-                return f"closing segment ({_fmt(a[e])}) -> ({_fmt(b[e])})"
-            return f"segment ({_fmt(a[e])}) -> ({_fmt(b[e])})"
-
-        raise ProfileError(
-            f"{source}: profile intersects itself: {edge_name(e1)} meets {edge_name(e2)}"
-        )
 
 
 def _surface_segments(pts: np.ndarray, closed_loop: bool) -> np.ndarray:
@@ -318,19 +323,18 @@ def _segment_end_normals(
     n_end = seg_n.copy()
     cos_crease = math.cos(math.radians(crease_angle))
     m = len(segments)
-    for k in range(m):
-        # Segment k ends where segment k+1 starts (if that segment exists).
-        nxt = (k + 1) % m
-        shares_vertex = segments[k, 1] == segments[nxt, 0] and (closed_loop or k + 1 < m)
-        if not shares_vertex:
-            continue
-        v = segments[k, 1]
-        a, b = seg_n[k], seg_n[nxt]
-        if not sharp[v] and float(a @ b) >= cos_crease - 1e-12:
-            avg = a + b
-            length = float(np.linalg.norm(avg))
-            if length > 1e-12:
-                n_end[k] = n_start[nxt] = avg / length
+    # Segment k ends where segment k+1 starts (if that segment exists).
+    index = np.arange(m)
+    nxt = (index + 1) % m
+    shares_vertex = (segments[:, 1] == segments[nxt, 0]) & (closed_loop | (index + 1 < m))
+    a, b = seg_n, seg_n[nxt]
+    avg = a + b
+    length = np.hypot(avg[:, 0], avg[:, 1])
+    smooth = (shares_vertex & ~sharp[segments[:, 1]]
+              & (np.einsum("ij,ij->i", a, b) >= cos_crease - 1e-12) & (length > 1e-12))
+    averaged = avg[smooth] / length[smooth, None]
+    n_end[smooth] = averaged
+    n_start[nxt[smooth]] = averaged
     # Ends of the surface that lie on the axis.
     for k, end, normals in ((0, 0, n_start), (m - 1, 1, n_end)):
         v = segments[k, end]

@@ -12,19 +12,29 @@ that :func:`lathe_shape.profiles.polyline.make_profile` and
 * a ``.json``/``.toml`` arc spec (:mod:`lathe_shape.profiles.arcs`: lines and
   equally divided arcs, paper section 2.3).
 
-``labels[k]`` names point ``k`` (file and line, or parameter and position)
-in error messages. :func:`format_profile_csv` / :func:`write_profile_csv`
+Files are UTF-8 text (a byte order mark is accepted; other bytes are
+refused naming the line and column). Numbers are plain decimal or scientific
+numbers (``10``, ``-0.5``, ``1e-3``): Python's ``1_0`` or non-ASCII digits are
+refused; ``inf`` and ``nan`` are read and then refused by the validation as
+non-finite. ``labels[k]`` names point ``k`` (file and line, or parameter and
+position) in error messages. :func:`format_profile_csv` / :func:`write_profile_csv`
 are the one CSV writer (the inverse of :func:`read_profile_csv`).
 """
 
 from __future__ import annotations
 
 import os
+import re
+from array import array
+from collections.abc import Iterator, Sequence
+from typing import BinaryIO
 
 import numpy as np
 
 from .arcs import load_profile_spec
 from .errors import ProfileError
+from .limits import MAX_PROFILE_POINTS, check_point_count
+from .text import PointLabels, decode_utf8
 
 __all__ = [
     "SPEC_SUFFIXES",
@@ -39,7 +49,7 @@ __all__ = [
 SPEC_SUFFIXES = (".json", ".toml")
 
 #: Raw points as every reader returns them: (points (n, 2), sharp (n,), labels).
-RawPoints = tuple[np.ndarray, np.ndarray, list[str]]
+RawPoints = tuple[np.ndarray, np.ndarray, Sequence[str]]
 
 
 def read_points(path: str | os.PathLike) -> RawPoints:
@@ -58,38 +68,47 @@ def parse_profile_string(text: str, source: str = "parameter 'profile'") -> RawP
     ``k`` in error messages.
     """
     items = [item.strip() for item in text.replace(";", ",").split(",")]
-    rows: list[tuple[list[float], bool, str]] = []
+    rows = _Rows(source, "point")
     for k, item in enumerate(item for item in items if item):
-        label = f"{source}, point {k + 1}"
-        point, flag = _parse_row(item.split(), label, f"expected 'r z' or 'r z sharp', got {item!r}")
-        rows.append((point, flag, label))
-    return _as_raw_points(rows)
+        rows.add(item.split(), k + 1, f"expected 'r z' or 'r z sharp', got {item!r}")
+    return rows.raw_points()
 
 
 def read_profile_csv(path: str | os.PathLike) -> RawPoints:
     """Read a profile CSV file: columns ``r,z[,sharp]``, ``#`` comments,
-    optional header. Returns ``(points, sharp, labels)`` like
-    :func:`parse_profile_string`; labels give file name and line number."""
+    optional header, UTF-8 text (a byte order mark is accepted). Returns
+    ``(points, sharp, labels)`` like :func:`parse_profile_string`; labels give
+    file name and line number. The file is read line by line, and refused
+    past :data:`~lathe_shape.profiles.limits.MAX_PROFILE_POINTS` points."""
     path = os.fspath(path)
+    rows = _Rows(path, "line")
     try:
-        with open(path, encoding="utf-8") as f:
-            lines = f.readlines()
+        with open(path, "rb") as f:
+            for number, raw in _numbered_lines(f):
+                content = decode_utf8(raw, path, number).split("#", 1)[0].strip()
+                if not content:
+                    continue
+                fields = [f.strip() for f in content.replace(";", ",").split(",")]
+                if len(fields) == 1:
+                    fields = content.split()
+                if not rows.numbers and _is_header(fields):
+                    continue
+                rows.add(fields, number, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
-    rows: list[tuple[list[float], bool, str]] = []
-    for number, line in enumerate(lines, start=1):
-        content = line.split("#", 1)[0].strip()
-        if not content:
-            continue
-        fields = [f.strip() for f in content.replace(";", ",").split(",")]
-        if len(fields) == 1:
-            fields = content.split()
-        if not rows and _is_header(fields):
-            continue
-        label = f"{path}, line {number}"
-        point, flag = _parse_row(fields, label, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
-        rows.append((point, flag, label))
-    return _as_raw_points(rows)
+    return rows.raw_points()
+
+
+def _numbered_lines(f: BinaryIO) -> Iterator[tuple[int, bytes]]:
+    """``(line number, bytes)`` of a binary file, without the line ends;
+    ``\n``, ``\r\n`` and ``\r`` all end a line (as in text mode)."""
+    number = 0
+    for raw in f:
+        raw = raw[:-1] if raw.endswith(b"\n") else raw
+        raw = raw[:-1] if raw.endswith(b"\r") else raw
+        for part in raw.split(b"\r"):
+            number += 1
+            yield number, part
 
 
 def format_profile_csv(
@@ -123,12 +142,31 @@ def write_profile_csv(
     return path
 
 
-def _parse_row(fields: list[str], label: str, wrong_count: str) -> tuple[list[float], bool]:
-    """One point: ``r z`` or ``r z sharp`` -> ([r, z], sharp)."""
-    if len(fields) not in (2, 3):
-        raise ProfileError(f"{label}: {wrong_count}")
-    point = [_parse_float(f, label) for f in fields[:2]]
-    return point, len(fields) == 3 and _parse_flag(fields[2], label)
+class _Rows:
+    """The points read so far (compact arrays, no per-point objects) and
+    their numbers (line or position) for the labels."""
+
+    def __init__(self, prefix: str, word: str) -> None:
+        self.prefix, self.word = prefix, word
+        self.coordinates = array("d")  # r0, z0, r1, z1, ...
+        self.sharp = bytearray()
+        self.numbers = array("q")
+
+    def add(self, fields: list[str], number: int, wrong_count: str) -> None:
+        """One point: ``r z`` or ``r z sharp``, number ``number``."""
+        label = f"{self.prefix}, {self.word} {number}"
+        if len(self.numbers) >= MAX_PROFILE_POINTS:
+            check_point_count(len(self.numbers) + 1, label, at_least=True)
+        if len(fields) not in (2, 3):
+            raise ProfileError(f"{label}: {wrong_count}")
+        self.coordinates.extend(_parse_float(f, label) for f in fields[:2])
+        self.sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+        self.numbers.append(number)
+
+    def raw_points(self) -> RawPoints:
+        points = np.frombuffer(self.coordinates, dtype=np.float64).reshape(-1, 2).copy()
+        sharp = np.frombuffer(bytes(self.sharp), dtype=np.uint8).astype(bool)
+        return points, sharp, PointLabels(self.prefix, np.frombuffer(self.numbers, np.int64), self.word)
 
 
 def _is_header(fields: list[str]) -> bool:
@@ -136,20 +174,21 @@ def _is_header(fields: list[str]) -> bool:
     return names[:2] == ["r", "z"] and (len(names) == 2 or names[2:] == ["sharp"])
 
 
+#: A plain decimal or scientific number, or the words inf, infinity, nan
+#: (read, then refused as non-finite by the validation). Python's float()
+#: also takes "1_0", non-ASCII digits and spaces; those are refused here.
+_NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)",
+                     re.IGNORECASE)
+
+
 def _parse_float(text: str, label: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise ProfileError(f"{label}: {text!r} is not a number") from None
+    if _NUMBER.fullmatch(text) is None:
+        raise ProfileError(f"{label}: {text!r} is not a number (write plain decimal numbers, "
+                           f"e.g. 10, -0.5 or 1e-3)")
+    return float(text)
 
 
 def _parse_flag(text: str, label: str) -> bool:
     if text in ("0", "1"):
         return text == "1"
     raise ProfileError(f"{label}: sharp flag must be 0 or 1, got {text!r}")
-
-
-def _as_raw_points(rows: list[tuple[list[float], bool, str]]) -> RawPoints:
-    points = np.array([point for point, _, _ in rows], dtype=np.float64).reshape(-1, 2)
-    sharp = np.array([flag for _, flag, _ in rows], dtype=bool)
-    return points, sharp, [label for _, _, label in rows]
