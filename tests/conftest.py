@@ -22,8 +22,9 @@ SCENE_FILES = sorted(SCENES.glob("*.xml"))
 def random_ring_profile(rng: np.random.Generator, n: int) -> np.ndarray:
     """A star-shaped closed loop around a point off the axis (a ring solid),
     last point == first."""
-    angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, n))
-    angles += np.linspace(0.0, 1e-3, n)  # keep them distinct
+    # Sorted angles with every gap below 180 degrees (else two edges of the
+    # star can cross): jittered even steps.
+    angles = (np.arange(n) + rng.uniform(0.0, 0.9, n)) * (2.0 * np.pi / n)
     radius = rng.uniform(0.4, 1.0, n)
     center = np.array([1.5, rng.uniform(-1.0, 1.0)])
     pts = center + radius[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)
