@@ -41,16 +41,19 @@ Limits checked before a render (:func:`check_render_budget`):
   available now (``MemAvailable`` in ``/proc/meminfo``, else the free
   physical pages) is refused with the estimate, instead of being killed by
   the system when it runs out of memory;
-* Mitsuba renders at most 2**32 samples in one pass and splits a larger
-  render into passes of equal sample counts: a film of more than 2**32
-  pixels, or an ``--spp`` that does not split evenly, is refused with the
-  nearest sample count that does.
+* samples: at most :data:`MAX_SAMPLES` (2**32 - 2**24) film pixels times
+  samples per pixel in one render. Mitsuba allows 2**32 samples in one pass
+  and splits a larger render into passes, but with Mitsuba 3.9.1 and Dr.Jit
+  1.5 (``llvm_ad_rgb``) a render of 2**32 - 256 samples comes out black
+  without an error, one of 2**32 runs out of memory, and a render split into
+  passes crashes; 2**32 - 2**24 samples render correctly. A render over the
+  limit is refused with the largest ``--spp`` that fits: render several
+  times with different ``--seed`` values and average the images instead.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import signal
 import sys
@@ -63,6 +66,7 @@ from typing import TextIO, TypeVar
 __all__ = [
     "DEFAULT_VARIANT",
     "FILM_BYTES_PER_PIXEL",
+    "MAX_SAMPLES",
     "MEMORY_FRACTION",
     "UINT32_MAX",
     "CliError",
@@ -105,8 +109,10 @@ FILM_BYTES_PER_PIXEL = 48
 #: memory is refused.
 MEMORY_FRACTION = 0.8
 
-#: Samples Mitsuba traces in one pass at most (its wavefront size limit).
-_PASS_SAMPLES = 2**32
+#: Samples (pixels x spp) one render may take: Mitsuba 3.9.1's LLVM variants
+#: silently render a black image a little below 2**32 samples and crash when
+#: Mitsuba splits a larger render into passes; this many render correctly.
+MAX_SAMPLES = 2**32 - 2**24
 
 _Result = TypeVar("_Result")
 
@@ -327,10 +333,10 @@ def format_bytes(count: float) -> str:
 
 def check_render_budget(width: int, height: int, spp: int, available: int | None = None) -> None:
     """Refuse a render of ``spp`` samples per pixel on a ``width`` x ``height``
-    film that cannot run: more memory than :data:`MEMORY_FRACTION` of
-    ``available`` (default: :func:`available_memory`), or a sample count
-    Mitsuba cannot split into passes of at most 2**32 samples (the rules are
-    in this module's docstring). Raises :class:`CliError` with the numbers."""
+    film that cannot run correctly: more memory than :data:`MEMORY_FRACTION`
+    of ``available`` (default: :func:`available_memory`), or more than
+    :data:`MAX_SAMPLES` samples (the rules are in this module's docstring).
+    Raises :class:`CliError` with the numbers."""
     width, height, spp = int(width), int(height), int(spp)
     pixels = width * height
     needed = pixels * FILM_BYTES_PER_PIXEL
@@ -339,16 +345,14 @@ def check_render_budget(width: int, height: int, spp: int, available: int | None
         raise CliError(
             f"a {width}x{height} film needs about {format_bytes(needed)} of memory, more than "
             f"{MEMORY_FRACTION:.0%} of the {format_bytes(available)} available: use a smaller --resolution")
-    if pixels > _PASS_SAMPLES:
-        raise CliError(f"a {width}x{height} film has more than 2**32 pixels, Mitsuba's limit for one pass")
-    samples = pixels * spp
-    if samples > _PASS_SAMPLES:
-        per_pass = spp // math.ceil(samples / _PASS_SAMPLES)  # Mitsuba's split
-        if spp % per_pass:
-            raise CliError(
-                f"--spp {spp} on a {width}x{height} film is {samples} samples, more than Mitsuba's 2**32 "
-                f"per pass, and does not split into passes of {per_pass} spp: use a multiple of "
-                f"{per_pass}, e.g. --spp {spp - spp % per_pass}")
+    if pixels > MAX_SAMPLES:
+        raise CliError(f"a {width}x{height} film has more pixels than the {MAX_SAMPLES} samples one render "
+                       "can take: use a smaller --resolution")
+    if pixels * spp > MAX_SAMPLES:
+        raise CliError(
+            f"{spp} spp on a {width}x{height} film is {pixels * spp} samples, more than the {MAX_SAMPLES} "
+            f"one render can take: use at most --spp {MAX_SAMPLES // pixels} (or average renders with "
+            "different --seed values)")
 
 
 def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
