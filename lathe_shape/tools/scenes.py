@@ -239,6 +239,16 @@ def _mitsuba_message(error: BaseException, path: str) -> str:
     return message
 
 
+def _still_used(defines: dict[str, str], text: str, edited: str) -> dict[str, str]:
+    """``defines`` less those that only the film sizes :func:`set_film_size`
+    replaced in ``text`` referred to (``-D res=...`` with a resolution
+    override), which Mitsuba would report as unused."""
+    def used(name: str, xml_text: str) -> bool:
+        return re.search(rf"\${re.escape(name)}(?!\w)", xml_text) is not None
+
+    return {k: v for k, v in defines.items() if used(k, edited) or not used(k, text)}
+
+
 def load_scene(
     path: str | os.PathLike,
     defines: dict[str, str] | None = None,
@@ -262,7 +272,8 @@ def load_scene(
         if edited is None:
             scene = mi.load_file(path, **defines)
         else:
-            scene = load_string_in(os.path.dirname(os.path.abspath(path)), edited, **defines)
+            scene = load_string_in(os.path.dirname(os.path.abspath(path)), edited,
+                                   **_still_used(defines, text, edited))
     except SceneError:
         raise
     except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError
