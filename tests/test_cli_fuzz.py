@@ -99,3 +99,42 @@ def test_render_command_line(options, values):
         check_render_options(args)
     except CliError:
         pass
+
+
+#: Whitespace as scene files have it inside tags, and comments between them.
+SPACES = st.lists(st.sampled_from([" ", "\n", "\t", "\n    "]), min_size=1, max_size=3).map("".join)
+GAPS = st.lists(st.sampled_from([" ", "\n", "\n    ", "<!-- a\n comment -->"]), max_size=3).map("".join)
+
+
+@st.composite
+def film_scenes(draw) -> str:
+    """A scene whose sensor's film has a width and/or height (or neither),
+    spread over lines in various ways."""
+    def gap(inside_tag: bool = False) -> str:
+        return draw(SPACES if inside_tag else GAPS)
+
+    values = st.sampled_from(["$res", "9"])
+    sizes = [f'<integer{gap(True)}name="{name}"{gap(True)}value="{draw(values)}"{gap(True)}/>'
+             for name in ("width", "height") if draw(st.booleans())]
+    children = gap().join(draw(st.permutations([*sizes, '<rfilter type="box"/>'])))
+    film = (f'<film type="hdrfilm"{gap(True)}/>' if not sizes and draw(st.booleans())
+            else f'<film type="hdrfilm"{gap(True)}>{gap()}{children}{gap()}</film>')
+    sensor = f'<sensor type="perspective">{gap()}{film}{gap()}</sensor>'
+    return f'{gap()}<scene version="3.0.0">{gap()}{sensor}{gap()}</scene>'
+
+
+@FUZZ
+@given(film_scenes(), st.integers(1, 10**6), st.integers(1, 10**6))
+def test_set_film_size(text, width, height):
+    """The film gets the size; the lines stay where they were."""
+    import xml.etree.ElementTree as ET
+
+    from lathe_shape.tools.scenes import set_film_size
+
+    edited = set_film_size(text, (width, height))
+    assert edited.count("\n") == text.count("\n")
+    film = ET.fromstring(edited).find("sensor/film")
+    values = {child.get("name"): child.get("value") for child in film if child.tag == "integer"}
+    assert values == {"width": str(width), "height": str(height)}
+    head = text[:text.index("<film")]
+    assert edited.startswith(head) and edited.endswith(text[text.index("</sensor>"):])

@@ -53,7 +53,7 @@ def lathe_ids(xml_text: str, source: str = "scene") -> list[str]:
 
 
 #: The start tag of an XML element (attribute values may contain ``>``).
-_START_TAG = re.compile(rb"""<([\w:.-]+)(?:\s+[\w:.-]+\s*=\s*(?:"[^"]*"|'[^']*'))*\s*(/?)>""")
+_START_TAG = re.compile(rb"""<([^\s/>]+)(?:\s+[^\s=/>]+\s*=\s*(?:"[^"]*"|'[^']*'))*\s*(/?)>""")
 
 
 def _film_elements(data: bytes, source: str) -> list[tuple[int, dict[str, int]]]:
