@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -111,3 +114,99 @@ def test_default_output_folders(tmp_path, monkeypatch):
     assert (tmp_path / "wine_glass_turntable" / "frame_0000.exr").is_file()
     assert compare.main([str(SCENES / "wine_glass.xml"), *small]) == 0
     assert (tmp_path / "wine_glass_compare" / "diff.png").is_file()
+
+
+def test_ctrl_c_during_render(tmp_path):
+    """A real SIGINT while the render kernel runs: exit 130 within seconds
+    (not when the kernel ends), one line on stderr, no output file."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lathe_shape.cli.render", "--variant", VARIANT, str(SCENES / "wine_glass.xml"),
+         "-o", str(tmp_path), "--spp", "100000", "--resolution", "128x128", "-D", "mesh_segments=32"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        header = proc.stdout.readline() + proc.stdout.readline()  # printed just before the render starts
+        assert "100000 spp" in header, proc.communicate(timeout=60)[1]
+        time.sleep(1.0)  # inside the kernel (the whole render takes minutes)
+        proc.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        _, stderr = proc.communicate(timeout=60)
+        latency = time.monotonic() - start
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, stderr
+    assert stderr.strip() == "lathe-render: interrupted" and "Traceback" not in stderr
+    assert os.listdir(tmp_path) == []
+    assert latency < 5.0, f"exit {latency:.2f} s after SIGINT"
+
+
+#: A scene with a comment before <scene> and a film: Mitsuba's line numbers
+#: must be the file's also when --resolution edits the film.
+LINE_SCENE = """<!--
+    A scene whose line 16 is an unknown element
+    and line 18 a lathe with an open profile (FAULT and PROFILE say which).
+-->
+<scene version="3.0.0">
+    <default name="res" value="16"/>
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0,-6,3" target="0,0,1" up="0,0,1"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="$res"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <emitter type="constant"/>
+
+    FAULT
+
+    <shape type="lathe">
+        <string name="profile" value="PROFILE"/>
+    </shape>
+</scene>
+"""
+
+
+@pytest.mark.parametrize("options", [[], ["--resolution", "20x10"], ["-D", "res=8"],
+                                     ["-D", "res=8", "--resolution", "12"]])
+def test_xml_errors_name_file_and_line(tmp_path, capsys, options):
+    from lathe_shape.cli import render
+
+    closed, open_ = "0 0, 1 0, 1 2, 0 2", "0 0, 1 0, 1 2, 0.5 2"
+    element = tmp_path / "element.xml"
+    element.write_text(LINE_SCENE.replace("FAULT", "<floaty/>").replace("PROFILE", closed))
+    profile = tmp_path / "profile.xml"
+    profile.write_text(LINE_SCENE.replace("FAULT", "").replace("PROFILE", open_))
+    for scene, line in ((element, 16), (profile, 18)):
+        code = render.main(["--variant", VARIANT, str(scene), "-o", str(tmp_path / "out"), *options])
+        stderr = capsys.readouterr().err
+        assert code == 2 and stderr.startswith("lathe-render: error: ") and "Traceback" not in stderr
+        assert f"{scene} (line {line}, col " in stderr, stderr
+        assert "string" not in stderr.replace('<string name="profile"', "")
+    assert not (tmp_path / "out").exists()
+
+
+def test_scene_file_errors(tmp_path, capsys):
+    """Files that are no scene text: one line naming the file."""
+    from lathe_shape.cli import render
+
+    def error(path) -> str:
+        code = render.main(["--variant", VARIANT, str(path), "-o", str(tmp_path), "--resolution", "8"])
+        stderr = capsys.readouterr().err
+        assert code == 2 and stderr.startswith("lathe-render: error: ") and "Traceback" not in stderr
+        return stderr
+
+    latin = tmp_path / "latin.xml"
+    latin.write_bytes(NO_INTEGRATOR.replace("<emitter", "<!-- caf\xe9 -->\n<emitter").encode("latin-1"))
+    assert f"{latin}: not a UTF-8 text file (byte 0xe9 on line 6)" in error(latin)
+    assert f"'{tmp_path}' is a folder, not a scene file" in error(tmp_path)
+    assert f"scene file '{tmp_path / 'nope.xml'}' not found" in error(tmp_path / "nope.xml")
+    binary = tmp_path / "image.xml"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00")
+    assert f"{binary}: not a UTF-8 text file (byte 0x89 on line 1)" in error(binary)
+    if os.geteuid() != 0:  # root reads any file
+        locked = tmp_path / "locked.xml"
+        locked.write_text(NO_INTEGRATOR)
+        locked.chmod(0)
+        assert f"cannot read scene file '{locked}' (Permission denied)" in error(locked)

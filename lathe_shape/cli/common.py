@@ -13,33 +13,82 @@ The convention (the README's "Command line" section):
 * ``-D KEY=VALUE`` -- set an XML ``<default>``, as Mitsuba's own CLI does.
 
 A user error prints ``PROG: error: MESSAGE`` (no traceback) and exits with
-status 2; Ctrl-C exits with status 130 after a one-line message.
+status 2; Ctrl-C exits with status 130 after a one-line message. No input
+gives a traceback: any other exception (``MemoryError``, an overflow, ...)
+is reported the same way, with its type named (``PROG: error: MemoryError:
+...``), and the environment variable ``LATHE_TRACEBACK=1`` shows its
+traceback for debugging.
+
+Renders run in a worker thread (:func:`interruptible`) while the main thread
+waits in steps of a tenth of a second: Python runs its Ctrl-C handler only in
+the main thread between bytecodes, so a Dr.Jit kernel launched from the main
+thread would hold Ctrl-C back until the kernel returns (tens of seconds for
+a large render). A running kernel cannot be cancelled: on Ctrl-C the command
+prints its message and ends the process at once (``os._exit``, after the
+main thread's clean-up has removed any temporary file); output files are
+written under temporary names and renamed when complete, so an interrupted
+command leaves no partial file.
+
+Limits checked before a render (:func:`check_render_budget`):
+
+* ``--spp`` and ``--seed`` are 32-bit unsigned integers (Mitsuba's types):
+  ``--spp`` in 1 .. 2**32 - 1, ``--seed`` in 0 .. 2**32 - 1;
+* memory: a render needs about :data:`FILM_BYTES_PER_PIXEL` bytes per film
+  pixel (the image block's channels, the developed image and its NumPy
+  copy), whatever the sample count -- Mitsuba's JIT variants trace every
+  sample of a pass in one kernel whose per-sample state stays in registers.
+  A film whose estimate exceeds :data:`MEMORY_FRACTION` of the memory
+  available now (``MemAvailable`` in ``/proc/meminfo``, else the free
+  physical pages) is refused with the estimate, instead of being killed by
+  the system when it runs out of memory;
+* samples: at most :data:`MAX_SAMPLES` (2**32 - 2**24) film pixels times
+  samples per pixel in one render. Mitsuba allows 2**32 samples in one pass
+  and splits a larger render into passes, but with Mitsuba 3.9.1 and Dr.Jit
+  1.5 (``llvm_ad_rgb``) a render of 2**32 - 256 samples comes out black
+  without an error, one of 2**32 runs out of memory, and a render split into
+  passes crashes; 2**32 - 2**24 samples render correctly. A render over the
+  limit is refused with the largest ``--spp`` that fits: render several
+  times with different ``--seed`` values and average the images instead.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
-from typing import TextIO
+from typing import TextIO, TypeVar
 
 __all__ = [
     "DEFAULT_VARIANT",
+    "FILM_BYTES_PER_PIXEL",
+    "MAX_SAMPLES",
+    "MEMORY_FRACTION",
+    "UINT32_MAX",
     "CliError",
     "ProgressBar",
     "add_output_option",
     "add_render_options",
+    "available_memory",
     "check_at_least",
+    "check_between",
+    "check_render_budget",
+    "check_render_options",
     "command_parser",
+    "error_message",
+    "format_bytes",
     "format_duration",
+    "interruptible",
     "is_interrupt",
     "open_scene",
     "output_folder",
     "parse_defines",
     "parse_resolution",
+    "render_image",
     "root_message",
     "run_command",
     "select_variant",
@@ -47,6 +96,25 @@ __all__ = [
 
 #: The variant every command uses unless ``--variant`` says otherwise.
 DEFAULT_VARIANT = "llvm_ad_rgb"
+
+#: Largest sample count and seed (Mitsuba passes both as 32-bit unsigned).
+UINT32_MAX = 2**32 - 1
+
+#: Memory a render needs per film pixel, in bytes: the film's image block
+#: (RGB, alpha, weight: 5 float32), the developed image (4 float32) and its
+#: (H, W, 3) float32 NumPy copy, rounded up (measured: about 30 bytes).
+FILM_BYTES_PER_PIXEL = 48
+
+#: A render whose memory estimate exceeds this fraction of the available
+#: memory is refused.
+MEMORY_FRACTION = 0.8
+
+#: Samples (pixels x spp) one render may take: Mitsuba 3.9.1's LLVM variants
+#: silently render a black image a little below 2**32 samples and crash when
+#: Mitsuba splits a larger render into passes; this many render correctly.
+MAX_SAMPLES = 2**32 - 2**24
+
+_Result = TypeVar("_Result")
 
 
 class CliError(Exception):
@@ -104,10 +172,24 @@ def add_render_options(parser: argparse.ArgumentParser, seed_help: str = "sample
         )
 
 
+def _number(value: float) -> str:
+    """``value`` as the user would write it (``%g`` for floats; integers in
+    full: ``%g`` of an integer beyond the float range raises OverflowError)."""
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def check_at_least(option: str, value: float | None, minimum: float) -> None:
     """Raise :class:`CliError` unless ``value`` (when given) is >= ``minimum``."""
     if value is not None and not value >= minimum:
-        raise CliError(f"{option} must be at least {minimum:g}, got {value:g}")
+        raise CliError(f"{option} must be at least {_number(minimum)}, got {_number(value)}")
+
+
+def check_between(option: str, value: float | None, minimum: float, maximum: float) -> None:
+    """Raise :class:`CliError` unless ``value`` (when given) is in
+    [``minimum``, ``maximum``]."""
+    check_at_least(option, value, minimum)
+    if value is not None and not value <= maximum:
+        raise CliError(f"{option} must be at most {_number(maximum)}, got {_number(value)}")
 
 
 def parse_defines(items: list[str] | None) -> dict[str, str]:
@@ -131,7 +213,9 @@ def parse_resolution(text: str) -> tuple[int, int]:
     if len(values) == 1:
         values = values * 2
     if len(values) != 2 or min(values) < 1:
-        raise CliError(f"resolution must look like 640x480 or 512, got {text!r}")
+        raise CliError(f"--resolution must look like 640x480 or 512, got {text!r}")
+    if max(values) > UINT32_MAX:
+        raise CliError(f"--resolution {text!r} is too large: at most {UINT32_MAX} pixels a side")
     return values[0], values[1]
 
 
@@ -153,6 +237,24 @@ def is_interrupt(error: BaseException | None) -> bool:
         seen.add(id(error))
         error = error.__cause__ or error.__context__
     return False
+
+
+#: The exception types whose message is itself the explanation for the user.
+_USER_ERRORS = (CliError, RuntimeError, ValueError, OSError)
+
+
+def error_message(error: BaseException) -> str:
+    """What ``PROG: error: ...`` says about ``error``: the innermost cause's
+    message (:func:`root_message`) for user errors; for any other exception
+    (e.g. ``MemoryError``, whose message is often empty) its type as well."""
+    message = root_message(error)
+    if isinstance(error, _USER_ERRORS):
+        return message
+    root = error
+    while root.__cause__ is not None:
+        root = root.__cause__
+    name = type(root).__name__
+    return f"{name}: {message}" if message else name
 
 
 def select_variant(variant: str) -> None:
@@ -190,6 +292,133 @@ def open_scene(
     values.update(extra_defines or {})
     size = parse_resolution(resolution) if resolution else None
     return load_scene(path, values, size)
+
+
+def check_render_options(args: argparse.Namespace) -> None:
+    """Check the options of :func:`add_render_options` before anything is
+    loaded: ``--spp`` and ``--seed`` in their 32-bit ranges, the syntax of
+    ``--resolution`` and of each ``-D``. Raises :class:`CliError` naming the
+    option."""
+    check_between("--spp", args.spp, 1, UINT32_MAX)
+    check_between("--seed", args.seed, 0, UINT32_MAX)
+    if args.resolution is not None:
+        parse_resolution(args.resolution)
+    parse_defines(getattr(args, "defines", None))
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now without swapping (``MemAvailable`` of
+    ``/proc/meminfo``; else the free physical pages), None if unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def format_bytes(count: float) -> str:
+    """``3.2e9`` -> ``"3.2 GB"`` (decimal units)."""
+    for unit in ("bytes", "kB", "MB", "GB", "TB"):
+        if count < 1000 or unit == "TB":
+            return f"{count:.0f} {unit}" if unit == "bytes" else f"{count:.1f} {unit}"
+        count /= 1000
+    raise AssertionError("unreachable")
+
+
+def check_render_budget(width: int, height: int, spp: int, available: int | None = None) -> None:
+    """Refuse a render of ``spp`` samples per pixel on a ``width`` x ``height``
+    film that cannot run correctly: more memory than :data:`MEMORY_FRACTION`
+    of ``available`` (default: :func:`available_memory`), or more than
+    :data:`MAX_SAMPLES` samples (the rules are in this module's docstring).
+    Raises :class:`CliError` with the numbers."""
+    width, height, spp = int(width), int(height), int(spp)
+    pixels = width * height
+    needed = pixels * FILM_BYTES_PER_PIXEL
+    available = available_memory() if available is None else available
+    if available is not None and needed > MEMORY_FRACTION * available:
+        raise CliError(
+            f"a {width}x{height} film needs about {format_bytes(needed)} of memory, more than "
+            f"{MEMORY_FRACTION:.0%} of the {format_bytes(available)} available: use a smaller --resolution")
+    if pixels > MAX_SAMPLES:
+        raise CliError(f"a {width}x{height} film has more pixels than the {MAX_SAMPLES} samples one render "
+                       "can take: use a smaller --resolution")
+    if pixels * spp > MAX_SAMPLES:
+        raise CliError(
+            f"{spp} spp on a {width}x{height} film is {pixels * spp} samples, more than the {MAX_SAMPLES} "
+            f"one render can take: use at most --spp {MAX_SAMPLES // pixels} (or average renders with "
+            "different --seed values)")
+
+
+def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
+    """``function(*args)`` run in a worker thread while the main thread waits
+    in short steps, so that Ctrl-C raises KeyboardInterrupt here within a
+    fraction of a second even while ``function`` runs a long Dr.Jit kernel.
+    The worker then goes on running (a kernel cannot be cancelled):
+    :func:`run_command` ends the process after its message. Called outside
+    the main thread, just calls ``function``."""
+    if threading.current_thread() is not threading.main_thread():
+        return function(*args)
+    outcome: dict[str, object] = {}
+    done = threading.Event()  # (not Thread.join: a join interrupted by Ctrl-C marks the thread stopped)
+    flags = _jit_flags()
+
+    def work() -> None:
+        try:
+            _set_jit_flags(flags)
+            outcome["value"] = function(*args)
+        except BaseException as e:  # re-raised in the calling thread
+            outcome["error"] = e
+        finally:
+            done.set()
+
+    threading.Thread(target=work, name="lathe-worker", daemon=True).start()
+    try:
+        while not done.wait(0.1):
+            pass
+    except BaseException:
+        _unfinished_work.append(done)
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
+
+
+def _jit_flags() -> dict[object, bool]:
+    """The calling thread's Dr.Jit flags (they are per thread), if Dr.Jit is loaded."""
+    if "drjit" not in sys.modules:
+        return {}
+    import drjit as dr
+
+    return {flag: dr.flag(flag) for flag in dr.JitFlag if flag != dr.JitFlag.Default}
+
+
+def _set_jit_flags(flags: dict[object, bool]) -> None:
+    """Give this thread the Dr.Jit ``flags`` of :func:`_jit_flags`."""
+    if not flags:
+        return
+    import drjit as dr
+
+    for flag, value in flags.items():
+        if dr.flag(flag) != value:
+            dr.set_flag(flag, value)
+
+
+def render_image(scene, spp: int, seed: int, integrator):
+    """``mi.render(scene, spp=spp, seed=seed, integrator=integrator)`` as an
+    (H, W, C) NumPy array, rendered in an :func:`interruptible` worker."""
+    import mitsuba as mi
+
+    return interruptible(lambda: mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy())
+
+
+#: The completion events of :func:`interruptible` workers left running after Ctrl-C.
+_unfinished_work: list[threading.Event] = []
 
 
 def output_folder(path: str | os.PathLike) -> str:
@@ -270,17 +499,45 @@ class ProgressBar:
             self.stream.flush()
 
 
+def _report(prog: str, error: BaseException) -> int:
+    """Print the one-line message for ``error``; returns the exit status."""
+    if os.environ.get("LATHE_TRACEBACK"):
+        import traceback
+
+        traceback.print_exception(error)
+    if not is_interrupt(error):
+        print(f"{prog}: error: {error_message(error)}", file=sys.stderr)
+        return 2
+    main_thread = threading.current_thread() is threading.main_thread()
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+    try:  # (a second Ctrl-C meanwhile is ignored, so that it gives no traceback)
+        print(f"{prog}: interrupted", file=sys.stderr)
+    finally:
+        if main_thread and _all_work_done():  # the process goes on: main() was called in-process
+            signal.signal(signal.SIGINT, handler)
+    return 130
+
+
+def _all_work_done() -> bool:
+    """Whether every :func:`interruptible` worker has finished."""
+    return all(done.is_set() for done in _unfinished_work)
+
+
 def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argparse.Namespace], int],
                 argv: list[str] | None = None) -> int:
-    """Parse ``argv`` and run ``body(args)``; user errors (:class:`CliError`,
-    scene and profile errors, a failed render) print ``PROG: error: ...``
-    and return 2, Ctrl-C prints ``PROG: interrupted`` and returns 130."""
-    args = parser.parse_args(argv)
+    """Parse ``argv`` and run ``body(args)``; every exception becomes a
+    one-line message (see :func:`error_message`): ``PROG: error: ...`` and
+    status 2, or on Ctrl-C ``PROG: interrupted`` and status 130. When a
+    render is still running in a worker (:func:`interruptible`), the process
+    ends here, with that status, instead of waiting for the render."""
     try:
-        return body(args)
-    except (CliError, KeyboardInterrupt, RuntimeError, ValueError, OSError) as e:
-        if is_interrupt(e):
-            print(f"{prog}: interrupted", file=sys.stderr)
-            return 130
-        print(f"{prog}: error: {root_message(e)}", file=sys.stderr)
-        return 2
+        status = body(parser.parse_args(argv))
+    except SystemExit:
+        raise  # argparse: --help, or a usage error already reported
+    except BaseException as e:
+        status = _report(prog, e)
+    if not _all_work_done():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status

@@ -113,13 +113,14 @@ def _scene_max_depth(scene) -> int | None:
     return None
 
 
-def open_comparison(args: argparse.Namespace) -> tuple[object, int, str]:
+def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     """Check the options, load the scene (which must have a sensor and a
-    lathe) and create the output folder; returns (scene, number of lathes,
-    folder)."""
-    from .common import open_scene, output_folder
+    lathe, and fit the limits of :func:`~.common.check_render_budget`) and
+    create the output folder; returns (scene, number of lathes, folder,
+    spp)."""
+    from .common import check_render_budget, check_render_options, open_scene, output_folder
 
-    check_at_least("--spp", args.spp, 1)
+    check_render_options(args)
     check_at_least("--mesh-segments", args.mesh_segments, 3)
     extra = {} if args.mesh_segments is None else {"mesh_segments": str(args.mesh_segments)}
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
@@ -130,42 +131,57 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str]:
     lathes = len(scene_lathes(scene))
     if not lathes:
         raise CliError(f"{args.scene}: the scene has no lathe shape to compare")
+    spp = args.spp or scene.sensors()[0].sampler().sample_count()
+    check_render_budget(*scene.sensors()[0].film().size(), spp)
     stem = os.path.splitext(os.path.basename(args.scene))[0]
-    return scene, lathes, output_folder(args.output or f"{stem}_compare")
+    return scene, lathes, output_folder(args.output or f"{stem}_compare"), spp
 
 
-def render_both(args: argparse.Namespace, scene, out: str, spp: int, depth: int) -> dict[str, np.ndarray]:
+#: The two renders: name -> integrator (``max_depth`` added from the scene).
+RUNS = {"exact": {"type": "lathe_path", "normal_check": "none"}, "mesh": {"type": "path"}}
+
+
+def render_both(args: argparse.Namespace, scene, spp: int, depth: int) -> dict[str, tuple[np.ndarray, float]]:
     """Render ``exact`` (lathe_path, normal_check none) and ``mesh`` (path)
-    with the same seed; writes each as EXR + PNG."""
+    with the same seed; returns name -> (image, seconds)."""
     import mitsuba as mi
 
-    from ..tools.images import write_exr, write_png
+    from .common import render_image
 
     images = {}
-    runs = (("exact", {"type": "lathe_path", "max_depth": depth, "normal_check": "none"}),
-            ("mesh", {"type": "path", "max_depth": depth}))
-    for name, integrator in runs:
+    for name, integrator in RUNS.items():
         start = time.perf_counter()
-        rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=mi.load_dict(integrator)).numpy()
-        elapsed = time.perf_counter() - start
-        images[name] = rgb
-        metadata = {"spp": int(spp), "integrator": integrator["type"], "seed": int(args.seed),
-                    "variant": args.variant, "scene": os.path.abspath(args.scene),
-                    "render_seconds": float(elapsed)}
-        write_exr(os.path.join(out, f"{name}.exr"), rgb, metadata)
-        write_png(os.path.join(out, f"{name}.png"), rgb)
-        print(f"  {name:<5} ({integrator['type']}) rendered in {elapsed:.2f} s", flush=True)
+        rgb = render_image(scene, spp, args.seed, mi.load_dict({**integrator, "max_depth": depth}))
+        images[name] = rgb, time.perf_counter() - start
+        print(f"  {name:<5} ({RUNS[name]['type']}) rendered in {images[name][1]:.2f} s", flush=True)
     return images
 
 
-def compare(args: argparse.Namespace) -> int:
+def write_comparison(args: argparse.Namespace, out: str, spp: int,
+                     images: dict[str, tuple[np.ndarray, float]]) -> float:
+    """Write ``exact`` and ``mesh`` (EXR + PNG) and ``diff.png``, each under a
+    temporary name renamed when complete; returns the difference's scale."""
     import mitsuba as mi
 
+    from ..tools.frames import atomic_path
+    from ..tools.images import write_images
+
+    for name, (rgb, seconds) in images.items():
+        metadata = {"spp": int(spp), "integrator": RUNS[name]["type"], "seed": int(args.seed),
+                    "variant": args.variant, "scene": os.path.abspath(args.scene),
+                    "render_seconds": float(seconds)}
+        write_images(os.path.join(out, name), rgb, metadata)
+    diff_png, scale = difference_image(images["exact"][0], images["mesh"][0])
+    with atomic_path(os.path.join(out, "diff.png")) as tmp:
+        mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(tmp)
+    return scale
+
+
+def compare(args: argparse.Namespace) -> int:
     from ..tools.images import image_errors
 
-    scene, lathes, out = open_comparison(args)
+    scene, lathes, out, spp = open_comparison(args)
     width, height = scene.sensors()[0].film().size()
-    spp = args.spp or scene.sensors()[0].sampler().sample_count()
     depth = _scene_max_depth(scene)
     depth = -1 if depth is None else depth
     print(
@@ -174,10 +190,9 @@ def compare(args: argparse.Namespace) -> int:
         f"{lathes} lathe(s)",
         flush=True,
     )
-    images = render_both(args, scene, out, spp, depth)
-    diff_png, scale = difference_image(images["exact"], images["mesh"])
-    mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.path.join(out, "diff.png"))
-    err = image_errors(images["mesh"], images["exact"])
+    images = render_both(args, scene, spp, depth)
+    scale = write_comparison(args, out, spp, images)
+    err = image_errors(images["mesh"][0], images["exact"][0])
     print(f"  mesh vs exact: relative mean abs error {err['rel_mae']:.4f}, relative RMSE "
           f"{err['rel_rmse']:.4f}, max abs difference {err['max_abs']:.4f}, bias {err['bias']:+.4f}")
     print(f"  diff.png: luminance mesh - exact, blue -{scale:.3g} .. white 0 .. red +{scale:.3g} "

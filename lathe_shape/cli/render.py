@@ -15,7 +15,18 @@ import os
 import sys
 import time
 
-from .common import add_output_option, add_render_options, command_parser, run_command
+from .common import (
+    CliError,
+    add_output_option,
+    add_render_options,
+    check_render_budget,
+    check_render_options,
+    command_parser,
+    open_scene,
+    output_folder,
+    render_image,
+    run_command,
+)
 
 __all__ = ["main", "build_parser"]
 
@@ -34,20 +45,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def render(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
-    import mitsuba as mi
-
-    from ..tools.images import write_exr, write_png
+    from ..tools.images import write_images
     from ..tools.scenes import integrator_name, scene_integrator
-    from .common import CliError, check_at_least, open_scene, output_folder
 
-    check_at_least("--spp", args.spp, 1)
+    check_render_options(args)
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
-    stem = os.path.join(output_folder(args.output), os.path.splitext(os.path.basename(args.scene))[0])
     if not scene.sensors():
         raise CliError(f"{args.scene}: the scene has no sensor")
     sensor = scene.sensors()[0]
     width, height = sensor.film().size()
     spp = args.spp or sensor.sampler().sample_count()
+    check_render_budget(width, height, spp)
+    stem = os.path.join(output_folder(args.output), os.path.splitext(os.path.basename(args.scene))[0])
     integrator = scene_integrator(scene)
     print(
         f"lathe-render: {args.scene} -> {stem}.exr\n"
@@ -56,9 +65,8 @@ def render(args: argparse.Namespace) -> int:
         flush=True,
     )
     start = time.perf_counter()
-    rgb = mi.render(scene, spp=spp, seed=args.seed, integrator=integrator).numpy()
+    rgb = render_image(scene, spp, args.seed, integrator)
     elapsed = time.perf_counter() - start
-
     metadata = {
         "spp": int(spp),
         "integrator": integrator_name(integrator),
@@ -67,11 +75,7 @@ def render(args: argparse.Namespace) -> int:
         "scene": os.path.abspath(args.scene),
         "render_seconds": float(elapsed),
     }
-    written = [stem + ".exr"]
-    write_exr(written[0], rgb, metadata)
-    if not args.no_png:
-        written.append(stem + ".png")
-        write_png(written[1], rgb)
+    written = write_images(stem, rgb, metadata, png=not args.no_png)
     print(f"  rendered in {elapsed:.2f} s; wrote {', '.join(written)}")
     return 0
 

@@ -4,11 +4,12 @@ and the one image-error metric every tool, script and test uses."""
 from __future__ import annotations
 
 import os
+from contextlib import nullcontext
 
 import numpy as np
 import OpenEXR
 
-__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8", "image_errors", "relative_error"]
+__all__ = ["write_exr", "read_exr", "write_png", "write_images", "to_srgb8", "image_errors", "relative_error"]
 
 
 def write_exr(
@@ -57,6 +58,22 @@ def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
     import mitsuba as mi
 
     mi.Bitmap(to_srgb8(rgb), pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))
+
+
+def write_images(stem: str, rgb: np.ndarray, metadata: dict[str, object] | None = None,
+                 png: bool = True) -> list[str]:
+    """Write ``STEM.exr`` (with ``metadata``) and, when ``png``, the sRGB
+    preview ``STEM.png``, each under a temporary name renamed when both are
+    complete (the EXR last), so that an interrupted write leaves no partial
+    file; returns the paths written."""
+    from .frames import atomic_path  # (frames imports this module)
+
+    paths = [stem + ".exr", stem + ".png"] if png else [stem + ".exr"]
+    with atomic_path(paths[0]) as tmp_exr, (atomic_path(paths[1]) if png else nullcontext()) as tmp_png:
+        if tmp_png:
+            write_png(tmp_png, rgb)
+        write_exr(tmp_exr, rgb, metadata)
+    return paths
 
 
 def image_errors(

@@ -4,16 +4,20 @@ that name the file), and the edits the tools make to scene XML text."""
 from __future__ import annotations
 
 import os
+import re
 import xml.etree.ElementTree as ET
+from xml.parsers import expat
 
 import mitsuba as mi
 
 __all__ = [
     "SceneError",
+    "SceneSyntaxError",
     "integrator_name",
     "lathe_ids",
     "load_scene",
     "load_string_in",
+    "read_scene_text",
     "points_text",
     "replace_profile",
     "scene_integrator",
@@ -26,11 +30,15 @@ class SceneError(RuntimeError):
     """A scene could not be loaded; the message names the file and the cause."""
 
 
+class SceneSyntaxError(SceneError):
+    """The scene text is not well-formed XML."""
+
+
 def _parse_xml(xml_text: str, source: str) -> ET.Element:
     try:
         return ET.fromstring(xml_text)
     except ET.ParseError as e:
-        raise SceneError(f"{source}: not a valid XML file ({e})") from None
+        raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
 
 
 def _lathe_elements(root: ET.Element) -> list[ET.Element]:
@@ -44,21 +52,73 @@ def lathe_ids(xml_text: str, source: str = "scene") -> list[str]:
     return [e.get("id", "") for e in _lathe_elements(_parse_xml(xml_text, source))]
 
 
+#: The start tag of an XML element (attribute values may contain ``>``).
+_START_TAG = re.compile(rb"""<([^\s/>]+)(?:\s+[^\s=/>]+\s*=\s*(?:"[^"]*"|'[^']*'))*\s*(/?)>""")
+
+
+def _film_elements(data: bytes, source: str) -> list[tuple[int, dict[str, int]]]:
+    """Where the films of the UTF-8 scene text ``data`` are: for each
+    ``<film>`` directly inside a ``<sensor>``, the byte offset of its start
+    tag and those of its ``width`` / ``height`` children (by name)."""
+    parser = expat.ParserCreate()
+    films: list[tuple[int, dict[str, int]]] = []
+    path: list[str] = []  # names of the open elements, outermost first
+
+    def start(name: str, attributes: dict[str, str]) -> None:
+        if name == "film" and path[-1:] == ["sensor"]:
+            films.append((parser.CurrentByteIndex, {}))
+        elif path[-2:] == ["sensor", "film"] and attributes.get("name") in ("width", "height"):
+            films[-1][1].setdefault(attributes["name"], parser.CurrentByteIndex)
+        path.append(name)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda name: path.pop()
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError as e:
+        raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
+    return films
+
+
+def _with_value(tag: bytes, value: int) -> bytes:
+    """The start tag ``tag`` with its ``value`` attribute set to ``value``."""
+    text = f'value="{value}"'.encode()
+    edited, count = re.subn(rb"""\bvalue\s*=\s*(?:"[^"]*"|'[^']*')""", text, tag, count=1)
+    if count:
+        return edited
+    end = len(tag) - (2 if tag.endswith(b"/>") else 1)
+    return tag[:end].rstrip() + b" " + text + tag[end:]
+
+
 def set_film_size(xml_text: str, size: tuple[int, int], source: str = "scene") -> str:
     """The scene text with every sensor's film set to ``size`` = (width,
-    height) pixels."""
-    root = _parse_xml(xml_text, source)
-    films = root.findall(".//sensor/film")
+    height) pixels.
+
+    Only the films' ``width`` / ``height`` values change (an element missing
+    is added on the line of the ``<film>`` tag): every other character,
+    comments and line breaks included, stays where it was, so that Mitsuba's
+    errors about the edited text give the line and column of the file."""
+    data = xml_text.encode("utf-8")
+    films = _film_elements(data, source)
     if not films:
         raise SceneError(f"{source}: no <sensor> with a <film> to set the resolution on")
-    for film in films:
+    edits: list[tuple[int, int, bytes]] = []  # (start, end, replacement) byte ranges
+    for film_start, children in films:
+        missing = b""
         for name, value in zip(("width", "height"), size, strict=True):
-            node = next((c for c in film if c.get("name") == name), None)
-            if node is None:
-                node = ET.SubElement(film, "integer", {"name": name})
-            node.tag = "integer"
-            node.set("value", str(value))
-    return ET.tostring(root, encoding="unicode")
+            if name in children:
+                tag = _START_TAG.match(data, children[name])
+                edits.append((tag.start(), tag.end(), _with_value(tag.group(0), value)))
+            else:
+                missing += f'<integer name="{name}" value="{value}"/>'.encode()
+        tag = _START_TAG.match(data, film_start)
+        if missing and tag.group(2):  # <film .../>: open it, add the sizes, close it
+            edits.append((tag.end() - 2, tag.end(), b">" + missing + b"</" + tag.group(1) + b">"))
+        elif missing:
+            edits.append((tag.end(), tag.end(), missing))
+    for start, end, replacement in sorted(edits, reverse=True):
+        data = data[:start] + replacement + data[end:]
+    return data.decode("utf-8")
 
 
 def set_defaults(xml_text: str, source: str = "scene", **values: object) -> str:
@@ -149,33 +209,77 @@ def _without_traceback(message: str) -> str:
     return head.rstrip() + ("\n  " + last[0].strip() if last else "")
 
 
+def read_scene_text(path: str | os.PathLike) -> str:
+    """The text of the scene file ``path``, which must be UTF-8; raises
+    :class:`SceneError` naming the file when it is missing, a folder,
+    unreadable or not UTF-8 text."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise SceneError(f"'{path}' is a folder, not a scene file")
+    if not os.path.isfile(path):
+        raise SceneError(f"scene file '{path}' not found")
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise SceneError(f"cannot read scene file '{path}' ({e.strerror or e})") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        where = f"byte 0x{data[e.start]:02x} on line {line}"
+        raise SceneError(f"{path}: not a UTF-8 text file ({where})") from None
+
+
+def _mitsuba_message(error: BaseException, path: str) -> str:
+    """Mitsuba's error, naming ``path`` where it says it parsed a string."""
+    message = _without_traceback(str(error))
+    for said in ("loading string (", "At string ("):
+        message = message.replace(said, said.replace("string", path))
+    return message
+
+
+def _still_used(defines: dict[str, str], text: str, edited: str) -> dict[str, str]:
+    """``defines`` less those that only the film sizes :func:`set_film_size`
+    replaced in ``text`` referred to (``-D res=...`` with a resolution
+    override), which Mitsuba would report as unused."""
+    def used(name: str, xml_text: str) -> bool:
+        return re.search(rf"\${re.escape(name)}(?!\w)", xml_text) is not None
+
+    return {k: v for k, v in defines.items() if used(k, edited) or not used(k, text)}
+
+
 def load_scene(
     path: str | os.PathLike,
     defines: dict[str, str] | None = None,
     resolution: tuple[int, int] | None = None,
 ) -> mi.Scene:
     """Load a Mitsuba XML scene (after ``import lathe_shape`` registered the
-    plugins), optionally overriding the film resolution."""
+    plugins), optionally overriding the film resolution.
+
+    Errors name ``path`` and the line and column in it, with or without
+    ``resolution``: the override edits only the films' sizes (see
+    :func:`set_film_size`), and a file that is not well-formed XML is left
+    to Mitsuba, whose message then is the same as without it."""
     path = os.fspath(path)
-    if os.path.isdir(path):
-        raise SceneError(f"'{path}' is a folder, not a scene file")
-    if not os.path.isfile(path):
-        raise SceneError(f"scene file '{path}' not found")
+    text = read_scene_text(path)
     defines = dict(defines or {})
     try:
-        if resolution is None:
+        try:
+            edited = None if resolution is None else set_film_size(text, resolution, path)
+        except SceneSyntaxError:
+            edited = None  # Mitsuba reports where the syntax error is
+        if edited is None:
             scene = mi.load_file(path, **defines)
         else:
-            with open(path, encoding="utf-8") as f:
-                text = set_film_size(f.read(), resolution, path)
-            scene = load_string_in(os.path.dirname(os.path.abspath(path)), text, **defines)
+            scene = load_string_in(os.path.dirname(os.path.abspath(path)), edited,
+                                   **_still_used(defines, text, edited))
     except SceneError:
         raise
     except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError
-        # With a resolution override Mitsuba parsed a string: name the file.
-        message = _without_traceback(str(e)).replace("At string (", f"At {path} (")
-        message = message.replace("While loading string (", f"While loading {path} (")
-        raise SceneError(f"{path}: could not load the scene:\n{message}") from None
+        if "KeyboardInterrupt" in str(e):  # Ctrl-C in a Python plugin, as Mitsuba's error text
+            raise KeyboardInterrupt from e
+        raise SceneError(f"{path}: could not load the scene:\n{_mitsuba_message(e, path)}") from None
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     return scene
