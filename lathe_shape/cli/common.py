@@ -63,6 +63,8 @@ import time
 from collections.abc import Callable
 from typing import TextIO, TypeVar
 
+from ..plugin.reference_mesh import available_memory
+
 __all__ = [
     "DEFAULT_VARIANT",
     "FILM_BYTES_PER_PIXEL",
@@ -306,22 +308,6 @@ def check_render_options(args: argparse.Namespace) -> None:
     parse_defines(getattr(args, "defines", None))
 
 
-def available_memory() -> int | None:
-    """Bytes of memory available now without swapping (``MemAvailable`` of
-    ``/proc/meminfo``; else the free physical pages), None if unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, OSError, ValueError):
-        return None
-
-
 def format_bytes(count: float) -> str:
     """``3.2e9`` -> ``"3.2 GB"`` (decimal units)."""
     for unit in ("bytes", "kB", "MB", "GB", "TB"):
@@ -355,6 +341,14 @@ def check_render_budget(width: int, height: int, spp: int, available: int | None
             "different --seed values)")
 
 
+def _reclaim_ctrl_c() -> None:
+    """Give Ctrl-C back to Python. Mitsuba's render installs a C signal
+    handler of its own (unseen by ``signal.getsignal``), which only asks the
+    render to wind down after its kernel has finished, tens of seconds
+    later."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     """``function(*args)`` run in a worker thread while the main thread waits
     in short steps, so that Ctrl-C raises KeyboardInterrupt here within a
@@ -380,7 +374,7 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     threading.Thread(target=work, name="lathe-worker", daemon=True).start()
     try:
         while not done.wait(0.1):
-            pass
+            _reclaim_ctrl_c()
     except BaseException:
         _unfinished_work.append(done)
         raise

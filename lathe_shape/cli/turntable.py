@@ -216,10 +216,18 @@ def open_job(args: argparse.Namespace) -> Job:
     from ..tools.scenes import integrator_name
     from ..tools.turntable import Turntable
     from ..tools.video import require_video
-    from .common import open_scene, output_folder
+    from .common import (
+        UINT32_MAX,
+        check_between,
+        check_render_budget,
+        check_render_options,
+        open_scene,
+        output_folder,
+    )
 
     check_at_least("--count", args.count, 1)
-    check_at_least("--spp", args.spp, 1)
+    check_render_options(args)
+    check_between("--seed", args.seed + args.count - 1, 0, UINT32_MAX)  # the last frame's seed
     check_at_least("--threads", args.threads, 1)
     if not args.fps > 0:
         raise CliError(f"--fps must be positive, got {args.fps:g}")
@@ -233,11 +241,12 @@ def open_job(args: argparse.Namespace) -> Job:
     else:
         scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
     turntable = Turntable(scene, args.mode, args.object, scene_path=args.scene, guides=args.denoise)
-    stem = os.path.splitext(os.path.basename(args.scene))[0]
-    out_dir = output_folder(args.output or f"{stem}_turntable")
     sensor = turntable.sensor
     size = tuple(int(v) for v in sensor.film().size())
     spp = args.spp or sensor.sampler().sample_count()
+    check_render_budget(*size, spp)
+    stem = os.path.splitext(os.path.basename(args.scene))[0]
+    out_dir = output_folder(args.output or f"{stem}_turntable")
     denoiser = None
     if backend:
         denoiser = Denoiser(backend, to_sensor=sensor.world_transform().inverse())
@@ -320,6 +329,7 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
     thread denoises and writes frame k while frame k + 1 renders."""
     from ..tools.frames import frame_state
     from ..tools.writer import FrameWriter
+    from .common import interruptible
 
     if todo:
         progress.show()
@@ -329,7 +339,8 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
                 progress.advance(None)
                 continue
             start = time.perf_counter()
-            image = job.turntable.render(frame.angle_deg, spp=job.spp, seed=frame.seed)
+            # In a worker thread: Ctrl-C interrupts at once, even mid-kernel.
+            image = interruptible(job.turntable.render, frame.angle_deg, job.spp, frame.seed)
             seconds = time.perf_counter() - start
             cleaned = None
             if job.denoiser is not None and job.denoiser.backend == "optix":

@@ -48,9 +48,9 @@ def reference_steps(mode: str, mesh_segments: int, who: str) -> int:
     return min(mesh_segments, PROXY_SEGMENTS) if mode == "proxy" else mesh_segments
 
 
-def available_memory() -> int:
-    """Bytes of memory available to this process now (``MemAvailable`` of
-    /proc/meminfo; the physical memory where that cannot be read)."""
+def available_memory() -> int | None:
+    """Bytes of memory available now without swapping (``MemAvailable`` of
+    ``/proc/meminfo``; else the free physical pages), None if unknown."""
     try:
         with open("/proc/meminfo", encoding="ascii") as f:
             for line in f:
@@ -58,7 +58,10 @@ def available_memory() -> int:
                     return int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
         pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, OSError, ValueError):
+        return None
 
 
 def check_mesh_budget(rings: int, steps: int, who: str, available: int | None = None) -> None:
@@ -68,7 +71,7 @@ def check_mesh_budget(rings: int, steps: int, who: str, available: int | None = 
     vertices = rings * (steps + 1)
     need = vertices * BYTES_PER_VERTEX
     available = available_memory() if available is None else available
-    if need > MEMORY_SHARE * available:
+    if available is not None and need > MEMORY_SHARE * available:
         raise ValueError(
             f"{who}: parameter 'mesh_segments' = {steps} asks for a reference mesh of "
             f"{vertices:,} vertices, about {need / 2**30:.1f} GiB, more than half the memory "
