@@ -59,6 +59,8 @@ from .common import (
     enter_annular_box,
     opaque,
     threaded_bvh,
+    to_unit_frame,
+    unit_frame,
 )
 
 __all__ = [
@@ -72,7 +74,8 @@ __all__ = [
     "polyline_geometry",
 ]
 
-#: Joint tolerance relative to the profile size (max of r extent, z extent).
+#: Joint tolerance relative to the profile size (max of r extent, z extent:
+#: the kernel works in the unit frame of kernels/common.py, where it is 1).
 TOL_REL = 1e-5
 
 #: Padding of the BVH boxes and of the bounding cylinder, in units of the
@@ -83,9 +86,10 @@ class PolylineData(LatheData):
     """Opaque Dr.Jit buffers describing one polyline profile.
 
     Built by :func:`build_polyline_data`. Besides the attributes of
-    :class:`~lathe_shape.kernels.common.LatheData` (``links``, ``n_nodes``
-    and the padded bounding cylinder ``bound_r``, ``bound_z_lo``,
-    ``bound_z_hi``):
+    :class:`~lathe_shape.kernels.common.LatheData` (``links``, ``n_nodes``,
+    the padded bounding cylinder ``bound_r``, ``bound_z_lo``, ``bound_z_hi``
+    and the unit frame ``scale``, ``inv_scale``, ``z_shift``); all lengths
+    below are in the unit frame:
 
     ``nodes``
         Float buffer, 8 floats per node of the four threaded BVH copies.
@@ -99,9 +103,9 @@ class PolylineData(LatheData):
     ``seg_arc``
         Float buffer, ``(arc start / total, L / total)`` per segment.
     ``tol``
-        Opaque Float scalar: the absolute joint tolerance.
+        Opaque Float scalar: the joint tolerance (unit frame).
     ``total_length``
-        Python float: total profile arclength.
+        Python float: total profile arclength (the user's units).
     ``n_seg``
         Python int: number of segments.
     """
@@ -158,6 +162,11 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     sh0 = flat if normal_start is None else _points("normal_start", normal_start, len(p0))
     sh1 = flat if normal_end is None else _points("normal_end", normal_end, len(p0))
 
+    # Everything below in the unit frame (kernels/common.py)
+    size, z_c, frame = unit_frame("build_polyline_data()", float(max(r0.max(), r1.max())),
+                                  float(min(z0.min(), z1.min())), float(max(z0.max(), z1.max())))
+    r0, r1, dr_, length = r0 / size, r1 / size, dr_ / size, length / size
+    z0, z1, dz_ = (z0 - z_c) / size, (z1 - z_c) / size, dz_ / size
     r_max = float(max(r0.max(), r1.max()))
     z_min = float(min(z0.min(), z1.min()))
     z_max = float(max(z0.max(), z1.max()))
@@ -197,7 +206,8 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         bound_z_lo=opaque(z_min - 2 * pad),
         bound_z_hi=opaque(z_max + 2 * pad),
         tol=opaque(tol),
-        total_length=total,
+        total_length=total * size,
+        **frame,
         n_seg=len(p0),
     )
 
@@ -223,8 +233,8 @@ class _Ray(LatheRay):
         super().__init__(data, o, d, tmax, active)
         self.r_o = dr.sqrt(self.c)   # distance of the moved origin from the axis
         self.parallel = self.a == 0  # parallel to the axis
-        # Tolerance on |w| - |n_r cross| (units of length times |d|)
-        self.tol_d = data.tol * dr.norm(d)
+        # Tolerance on |w| - |n_r cross| (units of length times |d| = 1)
+        self.tol_d = data.tol
 
 
 def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
@@ -329,8 +339,8 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
         node = node_next
 
     t = ray.s_enter + s_best
-    valid = found & (t > 0) & (t < tmax)
-    return PolylineHit(t=dr.select(valid, t, dr.inf), seg=seg,
+    valid = found & (t > 0) & (t < ray.tmax)
+    return PolylineHit(t=dr.select(valid, t * ray.t_scale, dr.inf), seg=seg,
                        u=dr.clip(u, 0, 1), valid=valid)
 
 
@@ -348,7 +358,7 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
         node_next, s_hit, _, _, hit = _visit(
             data, ray, node, ray.s_hi, ray.active & (node < ray.end))
         t = ray.s_enter + s_hit
-        found |= hit & (t > 0) & (t < tmax)
+        found |= hit & (t > 0) & (t < ray.tmax)
         node = node_next
     return found
 
@@ -370,12 +380,14 @@ def polyline_geometry(data: PolylineData, p: mi.Point3f, seg: mi.UInt32,
     geo = dr.gather(mi.Vector4f, data.seg_geo, seg)
     arc = dr.gather(mi.Vector2f, data.seg_arc, seg)
 
-    # Azimuth of the hit point (on the axis any azimuth will do: take phi = 0)
-    r = dr.sqrt(dr.fma(p.x, p.x, p.y * p.y))
+    # Azimuth of the hit point (on the axis any azimuth will do: take phi =
+    # 0), from the point in the unit frame (no over- or underflow)
+    q = to_unit_frame(data, p)
+    r = dr.sqrt(dr.fma(q.x, q.x, q.y * q.y))
     on_axis = r == 0
     inv_r = dr.select(on_axis, 0, dr.rcp(r))
-    cos_phi = dr.select(on_axis, 1, p.x * inv_r)
-    sin_phi = dr.select(on_axis, 0, p.y * inv_r)
+    cos_phi = dr.select(on_axis, 1, q.x * inv_r)
+    sin_phi = dr.select(on_axis, 0, q.y * inv_r)
 
     # Eqs. 8-9: the 2D left-hand normal rotated to the hit azimuth
     n = mi.Vector3f(geo.x * cos_phi, geo.x * sin_phi, geo.y)
@@ -397,5 +409,5 @@ def polyline_geometry(data: PolylineData, p: mi.Point3f, seg: mi.UInt32,
 
     # p = (r cos(2 pi u), r sin(2 pi u), z(v))
     dp_du = mi.Vector3f(-2 * dr.pi * p.y, 2 * dr.pi * p.x, 0)
-    dp_dv = mi.Vector3f(geo.z * cos_phi, geo.z * sin_phi, geo.w)
+    dp_dv = mi.Vector3f(geo.z * cos_phi, geo.z * sin_phi, geo.w) * data.scale
     return PolylineGeometry(n=n, sh_n=sh_n, uv=uv, dp_du=dp_du, dp_dv=dp_dv)
