@@ -94,7 +94,7 @@ class PolylineData(LatheData):
     ``nodes``
         Float buffer, 8 floats per node of the four threaded BVH copies.
         Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
-        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
+        ``(n_r, n_z, c, r0, z0, r1, z1, 1 / L^2)``.
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
         segment (geometric normal and profile tangent scaled for ``dp_dv``).
@@ -173,8 +173,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     tol = TOL_REL * max(r_max, z_max - z_min)
     pad = _BOX_PAD * tol
     c = n_r * r0 + n_z * z0
-    leaf_rec = np.stack([n_r, n_z, c, r0, z0, dr_ / length**2,
-                         dz_ / length**2, tol / length], axis=1)
+    leaf_rec = np.stack([n_r, n_z, c, r0, z0, r1, z1, 1 / length**2], axis=1)
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
@@ -235,6 +234,9 @@ class _Ray(LatheRay):
         self.parallel = self.a == 0  # parallel to the axis
         # Tolerance on |w| - |n_r cross| (units of length times |d| = 1)
         self.tol_d = data.tol
+        # d_z o_xy, for the sides of the segments' end points (_outside)
+        self.dz_ox = self.d.z * self.o.x
+        self.dz_oy = self.d.z * self.o.y
 
 
 def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
@@ -277,37 +279,72 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     r_hi = dr.select(ray.parallel, dr.inf, dr.maximum(s1, s2))
     box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
-    # Leaf: the nearer root whose point projects into the segment
-    s_hit, u_hit, ok = _segment_hit(data, ray, rec0, rec1, s1, s2, has_root, s_best)
+    # Leaf: the nearer root on the segment (half-open joints, see _segment_hit)
+    s_hit, u_hit, ok = _segment_hit(data, ray, rec0, rec1, s1, s2, wl >= cr, s_best)
     hit = active & is_leaf & ok
     return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
+def _outside(ray: _Ray, r, z):
+    """Whether the profile point ``(r, z)`` lies outside the ray's surface of
+    revolution: ``|d_z| r`` beyond the radius ``|d_z o_xy + (z - o_z) d_xy|``
+    of the ray at height ``z`` (times ``|d_z|``; eq. 15 substituted into
+    eq. 1). A segment's surface is crossed an odd number of times exactly
+    when its two end points lie on different sides. Evaluated identically
+    for the end of one segment and the start of the next (bit-equal data),
+    so that both agree on which of them a crossing at their joint belongs
+    to. Points on the axis, and every point for a horizontal ray, are never
+    outside (strict comparison): the profile's ends on the axis then agree."""
+    w = z - ray.o.z
+    vx = dr.fma(w, ray.d.x, ray.dz_ox)
+    vy = dr.fma(w, ray.d.y, ray.dz_oy)
+    zr = ray.d.z * r
+    return zr * zr > dr.fma(vx, vx, vy * vy)
+
+
+def _segment_hit(data: PolylineData, ray: _Ray, rec0, rec1, s1, s2, real, s_best):
     """The nearer of the roots ``s1``, ``s2`` that lies on the segment of the
     leaf record ``(rec0, rec1)``: ``(s, u, found)``, ``u`` the fraction
-    along the segment."""
+    along the segment; ``real``: the roots are real (``disc >= 0``).
+
+    Joints are half-open by construction: the sides of the segment's end
+    points (:func:`_outside`) fix the parity of its crossings. Odd: exactly
+    one root is taken, the one nearest the segment (within the joint
+    tolerance, for float32 rounding of ``u``). Even: both roots or none,
+    both within the tolerance and real (``disc >= 0``: a grazing ray that
+    float32 cannot resolve touches nothing). A crossing at a joint thus
+    counts once, on the segment that the shared end point's side gives it."""
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
-    r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
+    r0, z0, r1, z1, inv_l2 = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
+    er = (r1 - r0) * inv_l2
+    ez = (z1 - z0) * inv_l2
+    # Joint tolerance in u (|er| + |ez| is within a factor sqrt(2) of 1 / L)
+    tol_u = data.tol * (dr.abs(er) + dr.abs(ez))
     tol_n = data.tol * n_r * n_r
     o, d = ray.o, ray.d
 
-    def accept(s):
+    def off_segment(s):
         px = dr.fma(d.x, s, o.x)
         py = dr.fma(d.y, s, o.y)
         pz = dr.fma(d.z, s, o.z)
         # Fraction along the segment from the measured (r, z) of the point
         u = dr.fma(dr.sqrt(dr.fma(px, px, py * py)) - r0, er, (pz - z0) * ez)
-        # Reject the mirror nappe: n_r (c - n_z z) = n_r^2 r must be >= 0
+        # The mirror nappe (n_r (c - n_z z) = n_r^2 r < 0) is never on it
         nappe = n_r * dr.fma(-n_z, pz, c) >= -tol_n
-        ok = (has_root & (s > ray.s_lo) & (s < s_best) & (u >= -tol_u)
-              & (u <= 1 + tol_u) & nappe)
-        return ok, u
+        return u, dr.select(nappe, dr.maximum(-u, u - 1), dr.inf)
 
-    ok1, u1 = accept(s1)
-    ok2, u2 = accept(s2)
-    take2 = ok2 & (~ok1 | (s2 < s1))
-    return dr.select(take2, s2, s1), dr.select(take2, u2, u1), ok1 | ok2
+    u1, off1 = off_segment(s1)
+    u2, off2 = off_segment(s2)
+    odd = _outside(ray, r0, z0) != _outside(ray, r1, z1)
+    in1 = (s1 > ray.s_lo) & (s1 < s_best)
+    in2 = (s2 > ray.s_lo) & (s2 < s_best)
+    # Odd: the root nearer to the segment. Even: the nearer root in range
+    # when both lie on the segment.
+    pick2 = dr.select(odd, off2 < off1, in2 & (~in1 | (s2 < s1)))
+    both = ~odd & real & (dr.maximum(off1, off2) <= tol_u)
+    one = odd & (dr.minimum(off1, off2) <= tol_u)
+    ok = (one | both) & dr.select(pick2, in2, in1)
+    return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok
 
 
 # ---------------------------------------------------------------------------

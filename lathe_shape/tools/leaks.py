@@ -7,7 +7,12 @@ measurements follow rays through all their hits:
   :mod:`lathe_shape.tools.reference` checks every free stretch of the ray
   between hits, with :func:`polyline_callback` wrapping the kernel;
 * :func:`bspline_leak_rate` (B-spline lathes): a ray entering a closed
-  solid from outside must be crossed an even number of times.
+  solid from outside must be crossed an even number of times;
+* :func:`spawn_walk` and :func:`scene_parity_leaks` (any lathe, e.g. the
+  closed profiles of ``scenes/*.csv``): the same parity count, walked the
+  way integrators walk (``si.spawn_ray`` past every hit: the restart is
+  offset along the geometric normal by Mitsuba's ray epsilon), for the exact
+  kernel and for Mitsuba's own mesh of the lathe on the same rays.
 
 Needs an active JIT Mitsuba variant.
 """
@@ -25,7 +30,15 @@ from ..kernels.bspline import build_bspline_data, intersect_bspline
 from ..kernels.polyline import PolylineData, intersect_polyline, polyline_geometry
 from . import reference as ref
 
-__all__ = ["leak_test_arguments", "polyline_callback", "crossing_leaks", "bspline_leak_rate"]
+__all__ = [
+    "leak_test_arguments",
+    "polyline_callback",
+    "crossing_leaks",
+    "bspline_leak_rate",
+    "parity_rays",
+    "spawn_walk",
+    "scene_parity_leaks",
+]
 
 
 def leak_test_arguments(description: str) -> argparse.Namespace:
@@ -147,3 +160,93 @@ def bspline_leak_rate(curve: str, n: int, seed: int) -> tuple[float, int]:
     count = np.array(count)
     entered = count > 0
     return np.mean(count[entered] % 2 == 1), int(entered.sum())
+
+
+# ---------------------------------------------------------------------------
+# Spawn-ray parity walk (exact kernel vs Mitsuba's mesh)
+# ---------------------------------------------------------------------------
+
+def parity_rays(start: np.ndarray, end: np.ndarray, rng: np.random.Generator,
+                n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` rays ``(o, d)`` (float64, unit ``d``) from outside the lathe of
+    the profile segments ``start -> end`` (``(m, 2)`` each): origins on a
+    sphere of twice the profile's size around it. In equal shares they aim at
+    random points of the bounding box, at random points of the surface,
+    exactly at profile vertices (the joints) and next to them (grazing
+    convex corners: offsets of 1e-7 to 1e-3 of the size)."""
+    points = np.concatenate([start, end])
+    r_max = points[:, 0].max()
+    z_lo, z_hi = points[:, 1].min(), points[:, 1].max()
+    size = max(r_max, z_hi - z_lo)
+    k = n // 4
+
+    def revolve(rz):
+        phi = rng.uniform(0, 2 * np.pi, len(rz))
+        return np.stack([rz[:, 0] * np.cos(phi), rz[:, 0] * np.sin(phi), rz[:, 1]], axis=1)
+
+    box = np.stack([rng.uniform(-r_max, r_max, k), rng.uniform(-r_max, r_max, k),
+                    rng.uniform(z_lo, z_hi, k)], axis=1)
+    seg = rng.integers(0, len(start), k)
+    f = rng.uniform(0, 1, (k, 1))
+    on_surface = revolve((1 - f) * start[seg] + f * end[seg])
+    vertex = revolve(start[rng.integers(0, len(start), k)])
+    m = n - 3 * k
+    jitter = rng.normal(size=(m, 3))
+    jitter *= size * 10.0 ** rng.uniform(-7, -3, (m, 1)) / np.linalg.norm(jitter, axis=1, keepdims=True)
+    near = revolve(start[rng.integers(0, len(start), m)]) + jitter
+    target = np.vstack([box, on_surface, vertex, near])
+    v = rng.normal(size=(n, 3))
+    o = 2 * size * v / np.linalg.norm(v, axis=1, keepdims=True) + [0, 0, 0.5 * (z_lo + z_hi)]
+    d = target - o
+    return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
+               max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Follow rays through all their hits as an integrator does.
+
+    ``intersect(ray, active) -> mi.SurfaceInteraction3f`` is the query under
+    test; after every hit the ray continues as ``si.spawn_ray(d)``. Returns
+    ``(crossings, stuck)`` per ray: the number of hits, and whether the ray
+    still hit something after ``max_hits``."""
+    ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
+    active = dr.full(mi.Bool, True, len(o))
+    count = dr.zeros(mi.UInt32, len(o))
+    for _ in range(max_hits):
+        si = intersect(ray, active)
+        active &= si.is_valid()
+        count += mi.UInt32(active)
+        ray = dr.select(active, si.spawn_ray(ray.d), ray)
+        dr.eval(ray, active, count)
+        if not dr.any(active):
+            break
+    return count.numpy().astype(np.int64), active.numpy()
+
+
+def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
+                       chunk: int = 250_000) -> dict[str, int]:
+    """Spawn-ray parity walk through the lathe of the profile file
+    ``filename`` (a closed solid, local frame = world), in chunks of
+    ``chunk`` rays: the exact kernel (``ray_intersect_exact``) and Mitsuba's
+    mesh of the lathe (``mesh_segments`` azimuthal steps, the scene's own
+    accelerator) on the same :func:`parity_rays`. Every ray starts outside,
+    so an odd number of crossings is a leak. Returns the counts ``rays``,
+    ``hitting_exact``, ``odd_exact``, ``stuck_exact`` and the same for
+    ``mesh``."""
+    scene = mi.load_dict({"type": "scene", "lathe": {"type": "lathe", "filename": filename,
+                                                     "mesh_segments": mesh_segments}})
+    lathe = scene.shapes()[0]
+    queries = {"exact": lathe.ray_intersect_exact,
+               "mesh": lambda ray, active: scene.ray_intersect(ray, active=active)}
+    start, end = lathe.profile.segment_points()
+    rng = np.random.default_rng(seed)
+    counts = {"rays": 0} | {f"{what}_{name}": 0 for name in queries for what in ("hitting", "odd", "stuck")}
+    for done in range(0, n, chunk):
+        o, d = parity_rays(start, end, rng, min(chunk, n - done))
+        counts["rays"] += len(o)
+        for name, query in queries.items():
+            crossings, stuck = spawn_walk(query, o, d)
+            counts[f"hitting_{name}"] += int(np.sum(crossings > 0))
+            counts[f"odd_{name}"] += int(np.sum(crossings % 2 == 1))
+            counts[f"stuck_{name}"] += int(np.sum(stuck))
+    return counts
