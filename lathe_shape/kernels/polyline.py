@@ -82,6 +82,11 @@ TOL_REL = 1e-5
 #: joint tolerance (boxes must contain every hit that a segment accepts).
 _BOX_PAD = 8.0
 
+#: Shift of a joint into the solid for its side test, in units of the joint
+#: tolerance (see _side_points).
+_SIDE_SHIFT = 0.5
+
+
 class PolylineData(LatheData):
     """Opaque Dr.Jit buffers describing one polyline profile.
 
@@ -94,7 +99,7 @@ class PolylineData(LatheData):
     ``nodes``
         Float buffer, 8 floats per node of the four threaded BVH copies.
         Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
-        ``(n_r, n_z, c, r0, z0, r1, z1, 1 / L^2)``.
+        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
         segment (geometric normal and profile tangent scaled for ``dp_dv``).
@@ -102,6 +107,9 @@ class PolylineData(LatheData):
         Float buffer, ``(nr0, nz0, nr1, nz1)`` per segment (shading normals).
     ``seg_arc``
         Float buffer, ``(arc start / total, L / total)`` per segment.
+    ``seg_side``
+        Float buffer, ``(r, z)`` of the start and of the end of every
+        segment as its joint tests see them (see ``_side_points``).
     ``tol``
         Opaque Float scalar: the joint tolerance (unit frame).
     ``total_length``
@@ -173,7 +181,8 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     tol = TOL_REL * max(r_max, z_max - z_min)
     pad = _BOX_PAD * tol
     c = n_r * r0 + n_z * z0
-    leaf_rec = np.stack([n_r, n_z, c, r0, z0, r1, z1, 1 / length**2], axis=1)
+    leaf_rec = np.stack([n_r, n_z, c, r0, z0, dr_ / length**2,
+                         dz_ / length**2, tol / length], axis=1)
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
@@ -201,6 +210,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         seg_geo=buffer(seg_geo),
         seg_sh=buffer(seg_sh),
         seg_arc=buffer(seg_arc),
+        seg_side=buffer(_side_points(r0, z0, r1, z1, flat, _SIDE_SHIFT * tol)),
         bound_r=opaque(r_max + 2 * pad),
         bound_z_lo=opaque(z_min - 2 * pad),
         bound_z_hi=opaque(z_max + 2 * pad),
@@ -209,6 +219,34 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         **frame,
         n_seg=len(p0),
     )
+
+
+def _side_points(r0, z0, r1, z1, normal: np.ndarray, shift: float) -> np.ndarray:
+    """``(m, 4)``: per segment, its start and end point as the joint side
+    tests of the kernel see them (``_joint_side``): a joint shared by two
+    segments moved ``shift`` into the solid along the bisector of their
+    outward normals, the same value for both; an end on the axis unchanged.
+
+    Why: a ray passing within ``shift`` of a joint without crossing it
+    there (grazing a corner) then finds the joint on the same side as the
+    segments next to it, so neither segment reports a crossing at the joint
+    (two coincident crossings, of which a ray restarted past the first would
+    miss the second); a ray crossing at the joint still crosses exactly
+    one of the two segments."""
+    start = np.stack([r0, z0], axis=1)
+    end = np.stack([r1, z1], axis=1)
+    side = np.concatenate([start, end, start, end], axis=1)
+    starting_at = {tuple(p): k for k, p in enumerate(start)}
+    for k, p in enumerate(end):
+        j = starting_at.get(tuple(p))
+        bisector = normal[k] + normal[j] if j is not None else np.zeros(2)
+        norm = np.linalg.norm(bisector)
+        if norm > 1e-6:
+            q = p - shift * bisector / norm
+            q[0] = max(q[0], 0.0)
+            side[k, 6:] = q
+            side[j, 4:6] = q
+    return side
 
 
 def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData:
@@ -280,46 +318,60 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
     # Leaf: the nearer root on the segment (half-open joints, see _segment_hit)
-    s_hit, u_hit, ok = _segment_hit(data, ray, rec0, rec1, s1, s2, wl >= cr, s_best)
+    s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, wl >= cr, s_best,
+                                    active & is_leaf)
     hit = active & is_leaf & ok
     return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
 
 
-def _outside(ray: _Ray, r, z):
-    """Whether the profile point ``(r, z)`` lies outside the ray's surface of
-    revolution: ``|d_z| r`` beyond the radius ``|d_z o_xy + (z - o_z) d_xy|``
-    of the ray at height ``z`` (times ``|d_z|``; eq. 15 substituted into
-    eq. 1). A segment's surface is crossed an odd number of times exactly
-    when its two end points lie on different sides. Evaluated identically
-    for the end of one segment and the start of the next (bit-equal data),
-    so that both agree on which of them a crossing at their joint belongs
-    to. Points on the axis, and every point for a horizontal ray, are never
-    outside (strict comparison): the profile's ends on the axis then agree."""
+def _side_terms(ray: _Ray, r, z):
+    """``(|d_z| r)^2`` and ``|d_z o_xy + (z - o_z) d_xy|^2``: the profile point
+    ``(r, z)`` lies outside the ray's surface of revolution when the first
+    exceeds the second (the ray's radius at height ``z``, times ``|d_z|``:
+    eq. 15 substituted into eq. 1)."""
     w = z - ray.o.z
     vx = dr.fma(w, ray.d.x, ray.dz_ox)
     vy = dr.fma(w, ray.d.y, ray.dz_oy)
     zr = ray.d.z * r
-    return zr * zr > dr.fma(vx, vx, vy * vy)
+    return zr * zr, dr.fma(vx, vx, vy * vy)
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, rec0, rec1, s1, s2, real, s_best):
-    """The nearer of the roots ``s1``, ``s2`` that lies on the segment of the
-    leaf record ``(rec0, rec1)``: ``(s, u, found)``, ``u`` the fraction
-    along the segment; ``real``: the roots are real (``disc >= 0``).
+def _joint_side(data: PolylineData, ray: _Ray, end: mi.UInt32, active: mi.Bool) -> mi.Bool:
+    """Whether the end point ``end`` (``4 seg``: start, ``4 seg + 1``: end)
+    of a segment lies outside the ray's surface of revolution.
+
+    A segment's surface is crossed an odd number of times exactly when its
+    two end points lie on different sides. The test is evaluated identically
+    (bit-equal data, same operations) for the end of one segment and the
+    start of the next, so both agree on which of them a crossing at their
+    joint belongs to. Where float32 cannot tell the joint's side (within 16
+    ulps of the terms) the side of the joint moved into the solid decides
+    (see ``_side_points``). Points on the axis, and every point for a
+    horizontal ray, are never outside (strict comparison), so the profile's
+    ends on the axis agree."""
+    p = dr.gather(mi.Vector2f, data.seg_side, end, active)
+    radius2, ray2 = _side_terms(ray, p.x, p.y)
+    moved = dr.gather(mi.Vector2f, data.seg_side, end + 2, active)
+    radius2_m, ray2_m = _side_terms(ray, moved.x, moved.y)
+    unsure = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
+    return dr.select(unsure, radius2_m > ray2_m, radius2 > ray2)
+
+
+def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s_best, active):
+    """The nearer of the roots ``s1``, ``s2`` that lies on the segment
+    ``seg`` of the leaf record ``(rec0, rec1)``: ``(s, u, found)``, ``u``
+    the fraction along the segment; ``real``: the roots are real (``disc >=
+    0``).
 
     Joints are half-open by construction: the sides of the segment's end
-    points (:func:`_outside`) fix the parity of its crossings. Odd: exactly
-    one root is taken, the one nearest the segment (within the joint
-    tolerance, for float32 rounding of ``u``). Even: both roots or none,
-    both within the tolerance and real (``disc >= 0``: a grazing ray that
+    points (:func:`_joint_side`) fix the parity of its
+    crossings. Odd: exactly one root is taken, the one nearest the segment
+    (within the joint tolerance, for float32 rounding of ``u``). Even: both
+    roots or none, both within the tolerance and real (a grazing ray that
     float32 cannot resolve touches nothing). A crossing at a joint thus
     counts once, on the segment that the shared end point's side gives it."""
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
-    r0, z0, r1, z1, inv_l2 = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
-    er = (r1 - r0) * inv_l2
-    ez = (z1 - z0) * inv_l2
-    # Joint tolerance in u (|er| + |ez| is within a factor sqrt(2) of 1 / L)
-    tol_u = data.tol * (dr.abs(er) + dr.abs(ez))
+    r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
     tol_n = data.tol * n_r * n_r
     o, d = ray.o, ray.d
 
@@ -335,15 +387,21 @@ def _segment_hit(data: PolylineData, ray: _Ray, rec0, rec1, s1, s2, real, s_best
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    odd = _outside(ray, r0, z0) != _outside(ray, r1, z1)
+    odd = _joint_side(data, ray, seg * 4, active) != _joint_side(data, ray, seg * 4 + 1, active)
     in1 = (s1 > ray.s_lo) & (s1 < s_best)
     in2 = (s2 > ray.s_lo) & (s2 < s_best)
-    # Odd: the root nearer to the segment. Even: the nearer root in range
-    # when both lie on the segment.
-    pick2 = dr.select(odd, off2 < off1, in2 & (~in1 | (s2 < s1)))
-    both = ~odd & real & (dr.maximum(off1, off2) <= tol_u)
+    # Even: both roots, when both are on the segment (an annulus, n_r = 0,
+    # has one crossing: its double root is no pair); or, when the ray grazes
+    # the segment towards a joint, the root well inside it alone (its partner
+    # is lost to float32 rounding near the joint, past the tolerance).
+    both = real & (n_r != 0) & (dr.maximum(off1, off2) <= tol_u)
+    lone1 = real & (off1 <= -tol_u) & (off2 > tol_u)
+    lone2 = real & (off2 <= -tol_u) & (off1 > tol_u)
+    # Odd: the root nearer to the segment.
+    pick2 = dr.select(odd, off2 < off1, dr.select(both, in2 & (~in1 | (s2 < s1)), lone2))
+    even_ok = both | lone1 | lone2
     one = odd & (dr.minimum(off1, off2) <= tol_u)
-    ok = (one | both) & dr.select(pick2, in2, in1)
+    ok = dr.select(odd, one, even_ok) & dr.select(pick2, in2, in1)
     return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok
 
 
