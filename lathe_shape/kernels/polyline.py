@@ -97,9 +97,11 @@ class PolylineData(LatheData):
     below are in the unit frame:
 
     ``nodes``
-        Float buffer, 8 floats per node of the four threaded BVH copies.
-        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
-        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
+        Float buffer, 16 floats per node of the four threaded BVH copies.
+        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, ...)``; leaf:
+        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)`` and the
+        segment's end points as its joint side tests see them: ``(r0, z0,
+        r1, z1)`` and the same moved into the solid (see ``_side_points``).
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
         segment (geometric normal and profile tangent scaled for ``dp_dv``).
@@ -107,9 +109,6 @@ class PolylineData(LatheData):
         Float buffer, ``(nr0, nz0, nr1, nz1)`` per segment (shading normals).
     ``seg_arc``
         Float buffer, ``(arc start / total, L / total)`` per segment.
-    ``seg_side``
-        Float buffer, ``(r, z)`` of the start and of the end of every
-        segment as its joint tests see them (see ``_side_points``).
     ``tol``
         Opaque Float scalar: the joint tolerance (unit frame).
     ``total_length``
@@ -181,8 +180,9 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     tol = TOL_REL * max(r_max, z_max - z_min)
     pad = _BOX_PAD * tol
     c = n_r * r0 + n_z * z0
-    leaf_rec = np.stack([n_r, n_z, c, r0, z0, dr_ / length**2,
-                         dz_ / length**2, tol / length], axis=1)
+    leaf_rec = np.concatenate([np.stack([n_r, n_z, c, r0, z0, dr_ / length**2, dz_ / length**2,
+                                         tol / length], axis=1),
+                               _side_points(r0, z0, r1, z1, flat, _SIDE_SHIFT * tol)], axis=1)
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
@@ -190,7 +190,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
                   np.maximum(z0, z1) + pad], axis=1),
         # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
-        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3], 0.0, 0.0],
+        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3]] + [0.0] * 10,
         lambda k, b: leaf_rec[k],
     )
 
@@ -210,7 +210,6 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         seg_geo=buffer(seg_geo),
         seg_sh=buffer(seg_sh),
         seg_arc=buffer(seg_arc),
-        seg_side=buffer(_side_points(r0, z0, r1, z1, flat, _SIDE_SHIFT * tol)),
         bound_r=opaque(r_max + 2 * pad),
         bound_z_lo=opaque(z_min - 2 * pad),
         bound_z_hi=opaque(z_max + 2 * pad),
@@ -222,17 +221,19 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
 
 
 def _side_points(r0, z0, r1, z1, normal: np.ndarray, shift: float) -> np.ndarray:
-    """``(m, 4)``: per segment, its start and end point as the joint side
-    tests of the kernel see them (``_joint_side``): a joint shared by two
-    segments moved ``shift`` into the solid along the bisector of their
-    outward normals, the same value for both; an end on the axis unchanged.
+    """``(m, 8)``: per segment, its start and end point as the joint side
+    tests of the kernel see them (``_joint_sides``): ``(r0, z0, r1, z1)``
+    and the same moved into the solid, a joint shared by two segments moved
+    ``shift`` along the bisector of their outward normals, the same value
+    for both; an end on the axis unchanged.
 
-    Why: a ray passing within ``shift`` of a joint without crossing it
-    there (grazing a corner) then finds the joint on the same side as the
-    segments next to it, so neither segment reports a crossing at the joint
-    (two coincident crossings, of which a ray restarted past the first would
-    miss the second); a ray crossing at the joint still crosses exactly
-    one of the two segments."""
+    Why: only where float32 cannot tell the side of the joint itself, the
+    moved joint decides. A ray passing that close to a joint without
+    crossing the profile there (grazing a corner) then finds the joint on
+    the same side as the segments next to it, so neither segment reports a
+    crossing at the joint (two coincident crossings, of which a ray
+    restarted past the first would miss the second); a ray crossing at the
+    joint still crosses exactly one of the two segments."""
     start = np.stack([r0, z0], axis=1)
     end = np.stack([r1, z1], axis=1)
     side = np.concatenate([start, end, start, end], axis=1)
@@ -272,7 +273,7 @@ class _Ray(LatheRay):
         self.parallel = self.a == 0  # parallel to the axis
         # Tolerance on |w| - |n_r cross| (units of length times |d| = 1)
         self.tol_d = data.tol
-        # d_z o_xy, for the sides of the segments' end points (_outside)
+        # d_z o_xy, for the sides of the segments' end points (_side_terms)
         self.dz_ox = self.d.z * self.o.x
         self.dz_oy = self.d.z * self.o.y
 
@@ -284,8 +285,8 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
     whose segment is hit at ``s_hit < s_best``.
     """
-    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
-    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
+    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 4, active)
+    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 4 + 1, active)
     link, is_leaf, seg = bvh_link(data.links, node, active)
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     o, d = ray.o, ray.d
@@ -318,7 +319,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
     # Leaf: the nearer root on the segment (half-open joints, see _segment_hit)
-    s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, wl >= cr, s_best,
+    s_hit, u_hit, ok = _segment_hit(data, ray, node, rec0, rec1, s1, s2, wl >= cr, s_best,
                                     active & is_leaf)
     hit = active & is_leaf & ok
     return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
@@ -336,35 +337,39 @@ def _side_terms(ray: _Ray, r, z):
     return zr * zr, dr.fma(vx, vx, vy * vy)
 
 
-def _joint_side(data: PolylineData, ray: _Ray, end: mi.UInt32, active: mi.Bool) -> mi.Bool:
-    """Whether the end point ``end`` (``4 seg``: start, ``4 seg + 1``: end)
-    of a segment lies outside the ray's surface of revolution.
+def _joint_sides(data: PolylineData, ray: _Ray, node: mi.UInt32, active: mi.Bool):
+    """Whether the start and the end of the segment of leaf ``node`` lie outside the ray's
+    surface of revolution (:func:`_side_terms`).
 
     A segment's surface is crossed an odd number of times exactly when its
     two end points lie on different sides. The test is evaluated identically
     (bit-equal data, same operations) for the end of one segment and the
     start of the next, so both agree on which of them a crossing at their
-    joint belongs to. Where float32 cannot tell the joint's side (within 16
+    joint belongs to. Where float32 cannot tell a joint's side (within 16
     ulps of the terms) the side of the joint moved into the solid decides
     (see ``_side_points``). Points on the axis, and every point for a
     horizontal ray, are never outside (strict comparison), so the profile's
     ends on the axis agree."""
-    p = dr.gather(mi.Vector2f, data.seg_side, end, active)
-    radius2, ray2 = _side_terms(ray, p.x, p.y)
-    moved = dr.gather(mi.Vector2f, data.seg_side, end + 2, active)
-    radius2_m, ray2_m = _side_terms(ray, moved.x, moved.y)
-    unsure = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
-    return dr.select(unsure, radius2_m > ray2_m, radius2 > ray2)
+    ends = dr.gather(mi.Vector4f, data.nodes, node * 4 + 2, active)
+    moved = dr.gather(mi.Vector4f, data.nodes, node * 4 + 3, active)
+
+    def side(r, z, r_moved, z_moved):
+        radius2, ray2 = _side_terms(ray, r, z)
+        radius2_m, ray2_m = _side_terms(ray, r_moved, z_moved)
+        unsure = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
+        return dr.select(unsure, radius2_m > ray2_m, radius2 > ray2)
+
+    return side(ends.x, ends.y, moved.x, moved.y), side(ends.z, ends.w, moved.z, moved.w)
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s_best, active):
-    """The nearer of the roots ``s1``, ``s2`` that lies on the segment
-    ``seg`` of the leaf record ``(rec0, rec1)``: ``(s, u, found)``, ``u``
+def _segment_hit(data: PolylineData, ray: _Ray, node, rec0, rec1, s1, s2, real, s_best, active):
+    """The nearer of the roots ``s1``, ``s2`` that lies on the segment of
+    the leaf ``node`` with the record ``(rec0, rec1)``: ``(s, u, found)``, ``u``
     the fraction along the segment; ``real``: the roots are real (``disc >=
     0``).
 
     Joints are half-open by construction: the sides of the segment's end
-    points (:func:`_joint_side`) fix the parity of its
+    points (:func:`_joint_sides`) fix the parity of its
     crossings. Odd: exactly one root is taken, the one nearest the segment
     (within the joint tolerance, for float32 rounding of ``u``). Even: both
     roots or none, both within the tolerance and real (a grazing ray that
@@ -387,7 +392,8 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    odd = _joint_side(data, ray, seg * 4, active) != _joint_side(data, ray, seg * 4 + 1, active)
+    side_start, side_end = _joint_sides(data, ray, node, active)
+    odd = side_start != side_end
     in1 = (s1 > ray.s_lo) & (s1 < s_best)
     in2 = (s2 > ray.s_lo) & (s2 < s_best)
     # Even: both roots, when both are on the segment (an annulus, n_r = 0,
