@@ -362,15 +362,31 @@ def _joint_sides(data: PolylineData, ray: _Ray, node: mi.UInt32, active: mi.Bool
     return side(ends.x, ends.y, moved.x, moved.y), side(ends.z, ends.w, moved.z, moved.w)
 
 
+@dr.syntax
+def _crossing_parity(data: PolylineData, ray: _Ray, node, n_r, off1, off2, real, tol_u, active):
+    """Whether the ray crosses the segment of leaf ``node`` an odd number of
+    times. ``off1``, ``off2``: how far its roots lie off the segment (in
+    ``u``; <= 0: on it); ``real``: whether they are real. Where no root lies within the joint tolerance
+    ``tol_u`` of an end, the roots tell (an annulus, ``n_r = 0``, has one
+    crossing: its double root is no pair); else the sides of the segment's
+    end points, shared with its neighbours (:func:`_joint_sides`). Packets
+    without such a lane skip that work."""
+    odd = dr.select(n_r == 0, off1 <= 0, real & ((off1 <= 0) != (off2 <= 0)))
+    at_joint = active & ((dr.abs(off1) <= tol_u) | (dr.abs(off2) <= tol_u))
+    if at_joint:
+        side_start, side_end = _joint_sides(data, ray, node, at_joint)
+        odd = side_start != side_end
+    return odd
+
+
 def _segment_hit(data: PolylineData, ray: _Ray, node, rec0, rec1, s1, s2, real, s_best, active):
     """The nearer of the roots ``s1``, ``s2`` that lies on the segment of
     the leaf ``node`` with the record ``(rec0, rec1)``: ``(s, u, found)``, ``u``
     the fraction along the segment; ``real``: the roots are real (``disc >=
     0``).
 
-    Joints are half-open by construction: the sides of the segment's end
-    points (:func:`_joint_sides`) fix the parity of its
-    crossings. Odd: exactly one root is taken, the one nearest the segment
+    Joints are half-open by construction: the parity of the segment's
+    crossings is fixed first (:func:`_crossing_parity`). Odd: exactly one root is taken, the one nearest the segment
     (within the joint tolerance, for float32 rounding of ``u``). Even: both
     roots or none, both within the tolerance and real (a grazing ray that
     float32 cannot resolve touches nothing). A crossing at a joint thus
@@ -392,8 +408,7 @@ def _segment_hit(data: PolylineData, ray: _Ray, node, rec0, rec1, s1, s2, real, 
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    side_start, side_end = _joint_sides(data, ray, node, active)
-    odd = side_start != side_end
+    odd = _crossing_parity(data, ray, node, n_r, off1, off2, real, tol_u, active)
     in1 = (s1 > ray.s_lo) & (s1 < s_best)
     in2 = (s2 > ray.s_lo) & (s2 < s_best)
     # Even: both roots, when both are on the segment (an annulus, n_r = 0,
