@@ -31,12 +31,22 @@ taken in the stable form ``q = -(b + sign(b) sqrt(disc))``, ``s = q / a,
 c / q``, which avoids subtracting two nearly equal numbers; the discriminant
 and the constant term are evaluated as products of differences
 (``(u - v)(u + v)``) rather than as differences of squares, which would
-cancel for rays that graze a segment or start near it; and a root is accepted
-on a segment when its profile position lies within an absolute tolerance
-(scaled to the profile size) of the segment, so that a ray aimed exactly at
-a joint between two segments, where float32 rounding may place the hit just
-outside both, still finds a surface. Near-tangent rays (within that
-tolerance, e.g. through a cone apex on the axis) keep their double root.
+cancel for rays that graze a segment or start near it; and joints are
+half-open, decided once for both segments that meet there.
+
+Joints. A ray aimed at a joint between two segments may, after float32
+rounding, land just outside both, or just inside both. Each segment
+therefore first fixes the parity of its crossings: odd exactly when its two
+end points lie on different sides of the ray's surface of revolution (the
+hyperboloid swept by the ray about the axis), a test evaluated bit for bit
+alike by both segments of a joint, so that the parities of all segments
+add up to an even number of crossings for every ray: a ray that enters
+leaves. An odd segment reports the one root nearest to it (within a small
+tolerance of its ends), an even one both roots or none. Where float32
+cannot tell a joint's side, the side of the joint moved slightly into the
+solid decides, so that a ray grazing a corner reports no crossing there
+rather than two coincident ones. This costs little: only segments with a
+root at one of their ends evaluate the sides (a symbolic ``if``).
 
 The functions need an active JIT Mitsuba variant (``llvm_*`` or ``cuda_*``)
 when called; importing the module needs none.
@@ -97,11 +107,9 @@ class PolylineData(LatheData):
     below are in the unit frame:
 
     ``nodes``
-        Float buffer, 16 floats per node of the four threaded BVH copies.
-        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, ...)``; leaf:
-        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)`` and the
-        segment's end points as its joint side tests see them: ``(r0, z0,
-        r1, z1)`` and the same moved into the solid (see ``_side_points``).
+        Float buffer, 8 floats per node of the four threaded BVH copies.
+        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
+        ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
         segment (geometric normal and profile tangent scaled for ``dp_dv``).
@@ -109,6 +117,10 @@ class PolylineData(LatheData):
         Float buffer, ``(nr0, nz0, nr1, nz1)`` per segment (shading normals).
     ``seg_arc``
         Float buffer, ``(arc start / total, L / total)`` per segment.
+    ``seg_side``
+        Float buffer, 8 floats per segment: its end points as its joint side
+        tests see them, ``(r0, z0, r1, z1)`` and the same moved into the
+        solid (see ``_side_points``).
     ``tol``
         Opaque Float scalar: the joint tolerance (unit frame).
     ``total_length``
@@ -180,9 +192,8 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     tol = TOL_REL * max(r_max, z_max - z_min)
     pad = _BOX_PAD * tol
     c = n_r * r0 + n_z * z0
-    leaf_rec = np.concatenate([np.stack([n_r, n_z, c, r0, z0, dr_ / length**2, dz_ / length**2,
-                                         tol / length], axis=1),
-                               _side_points(r0, z0, r1, z1, flat, _SIDE_SHIFT * tol)], axis=1)
+    leaf_rec = np.stack([n_r, n_z, c, r0, z0, dr_ / length**2,
+                         dz_ / length**2, tol / length], axis=1)
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
@@ -190,7 +201,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
                   np.maximum(z0, z1) + pad], axis=1),
         # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
-        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3]] + [0.0] * 10,
+        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3], 0.0, 0.0],
         lambda k, b: leaf_rec[k],
     )
 
@@ -210,6 +221,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         seg_geo=buffer(seg_geo),
         seg_sh=buffer(seg_sh),
         seg_arc=buffer(seg_arc),
+        seg_side=buffer(_side_points(r0, z0, r1, z1, flat, _SIDE_SHIFT * tol)),
         bound_r=opaque(r_max + 2 * pad),
         bound_z_lo=opaque(z_min - 2 * pad),
         bound_z_hi=opaque(z_max + 2 * pad),
@@ -285,8 +297,8 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
     whose segment is hit at ``s_hit < s_best``.
     """
-    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 4, active)
-    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 4 + 1, active)
+    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
+    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
     link, is_leaf, seg = bvh_link(data.links, node, active)
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     o, d = ray.o, ray.d
@@ -319,7 +331,7 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
     # Leaf: the nearer root on the segment (half-open joints, see _segment_hit)
-    s_hit, u_hit, ok = _segment_hit(data, ray, node, rec0, rec1, s1, s2, wl >= cr, s_best,
+    s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, s_best,
                                     active & is_leaf)
     hit = active & is_leaf & ok
     return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
@@ -337,8 +349,8 @@ def _side_terms(ray: _Ray, r, z):
     return zr * zr, dr.fma(vx, vx, vy * vy)
 
 
-def _joint_sides(data: PolylineData, ray: _Ray, node: mi.UInt32, active: mi.Bool):
-    """Whether the start and the end of the segment of leaf ``node`` lie outside the ray's
+def _joint_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool):
+    """Whether the start and the end of segment ``seg`` lie outside the ray's
     surface of revolution (:func:`_side_terms`).
 
     A segment's surface is crossed an odd number of times exactly when its
@@ -350,8 +362,11 @@ def _joint_sides(data: PolylineData, ray: _Ray, node: mi.UInt32, active: mi.Bool
     (see ``_side_points``). Points on the axis, and every point for a
     horizontal ray, are never outside (strict comparison), so the profile's
     ends on the axis agree."""
-    ends = dr.gather(mi.Vector4f, data.nodes, node * 4 + 2, active)
-    moved = dr.gather(mi.Vector4f, data.nodes, node * 4 + 3, active)
+    # Scalar gathers: rare, and packet gathers of another buffer would let
+    # its memory layout select among more traced kernels
+    side = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(8)]
+    ends = mi.Vector4f(*side[:4])
+    moved = mi.Vector4f(*side[4:])
 
     def side(r, z, r_moved, z_moved):
         radius2, ray2 = _side_terms(ray, r, z)
@@ -363,8 +378,8 @@ def _joint_sides(data: PolylineData, ray: _Ray, node: mi.UInt32, active: mi.Bool
 
 
 @dr.syntax
-def _crossing_parity(data: PolylineData, ray: _Ray, node, n_r, off1, off2, real, tol_u, active):
-    """Whether the ray crosses the segment of leaf ``node`` an odd number of
+def _crossing_parity(data: PolylineData, ray: _Ray, seg, n_r, off1, off2, real, tol_u, active):
+    """Whether the ray crosses segment ``seg`` an odd number of
     times. ``off1``, ``off2``: how far its roots lie off the segment (in
     ``u``; <= 0: on it); ``real``: whether they are real. Where no root lies within the joint tolerance
     ``tol_u`` of an end, the roots tell (an annulus, ``n_r = 0``, has one
@@ -374,23 +389,23 @@ def _crossing_parity(data: PolylineData, ray: _Ray, node, n_r, off1, off2, real,
     odd = dr.select(n_r == 0, off1 <= 0, real & ((off1 <= 0) != (off2 <= 0)))
     at_joint = active & ((dr.abs(off1) <= tol_u) | (dr.abs(off2) <= tol_u))
     if at_joint:
-        side_start, side_end = _joint_sides(data, ray, node, at_joint)
+        side_start, side_end = _joint_sides(data, ray, seg, at_joint)
         odd = side_start != side_end
     return odd
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, node, rec0, rec1, s1, s2, real, s_best, active):
-    """The nearer of the roots ``s1``, ``s2`` that lies on the segment of
-    the leaf ``node`` with the record ``(rec0, rec1)``: ``(s, u, found)``, ``u``
-    the fraction along the segment; ``real``: the roots are real (``disc >=
-    0``).
+def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s_best, active):
+    """The nearer of the roots ``s1``, ``s2`` that lies on segment ``seg``
+    (leaf record ``(rec0, rec1)``): ``(s, u, found)``, ``u`` the fraction
+    along the segment; ``real``: the roots are real (``disc >= 0``).
 
     Joints are half-open by construction: the parity of the segment's
-    crossings is fixed first (:func:`_crossing_parity`). Odd: exactly one root is taken, the one nearest the segment
-    (within the joint tolerance, for float32 rounding of ``u``). Even: both
-    roots or none, both within the tolerance and real (a grazing ray that
-    float32 cannot resolve touches nothing). A crossing at a joint thus
-    counts once, on the segment that the shared end point's side gives it."""
+    crossings is fixed first (:func:`_crossing_parity`). Odd: exactly one
+    root is taken, the one nearest the segment (within the joint tolerance,
+    for float32 rounding of ``u``). Even: both roots or none, both within
+    the tolerance and real (a grazing ray that float32 cannot resolve
+    touches nothing). A crossing at a joint thus counts once, on the
+    segment that the shared end point's side gives it."""
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
     tol_n = data.tol * n_r * n_r
@@ -408,7 +423,7 @@ def _segment_hit(data: PolylineData, ray: _Ray, node, rec0, rec1, s1, s2, real, 
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    odd = _crossing_parity(data, ray, node, n_r, off1, off2, real, tol_u, active)
+    odd = _crossing_parity(data, ray, seg, n_r, off1, off2, real, tol_u, active)
     in1 = (s1 > ray.s_lo) & (s1 < s_best)
     in2 = (s2 > ray.s_lo) & (s2 < s_best)
     # Even: both roots, when both are on the segment (an annulus, n_r = 0,
