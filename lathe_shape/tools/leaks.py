@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.bspline import build_bspline_data, intersect_bspline
-from ..kernels.polyline import PolylineData, intersect_polyline, polyline_geometry
+from ..kernels.polyline import PolylineData, build_polyline_data, intersect_polyline, polyline_geometry
 from . import reference as ref
 
 __all__ = [
@@ -38,18 +38,30 @@ __all__ = [
     "parity_rays",
     "spawn_walk",
     "scene_parity_leaks",
+    "random_profile_leaks",
+    "parity_summary",
 ]
 
 
-def leak_test_arguments(description: str) -> argparse.Namespace:
-    """The leak test scripts' options (``n_rays`` in all, default 1e6, and
-    ``--variant``), parsed; selects the Mitsuba variant."""
+def leak_test_arguments(description: str, argv: list[str] | None = None) -> argparse.Namespace:
+    """The leak test scripts' options, parsed from ``argv`` (default: the
+    command line): the number of rays in all (``--rays N`` or positionally,
+    default 1e6), ``--variant``, and for ``scripts/leak_test.py``
+    ``--random-profiles`` (the crossing test on random profiles instead of
+    the spawn-ray parity walk through ``scenes/*.csv``), ``--chunk`` and
+    ``--mesh-segments``. Selects the Mitsuba variant."""
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
+    parser.add_argument("n_rays", nargs="?", type=float, default=None, help="rays in all (default 1e6)")
+    parser.add_argument("--rays", type=float, default=None, help="rays in all (default 1e6)")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
-    args = parser.parse_args()
+    parser.add_argument("--random-profiles", action="store_true",
+                        help="polylines: the float64 crossing test on random profiles")
+    parser.add_argument("--chunk", type=int, default=250_000, help="rays per batch (default 250000)")
+    parser.add_argument("--mesh-segments", type=int, default=512,
+                        help="azimuthal steps of the compared mesh (default 512)")
+    args = parser.parse_args(argv)
     mi.set_variant(args.variant)
-    args.n_rays = int(args.n_rays)
+    args.n_rays = int(args.rays or args.n_rays or 1e6)
     return args
 
 
@@ -250,3 +262,43 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
             counts[f"odd_{name}"] += int(np.sum(crossings % 2 == 1))
             counts[f"stuck_{name}"] += int(np.sum(stuck))
     return counts
+
+
+def random_profile_leaks(n_rays: int, seed: int = 2024,
+                         chunk: int = 200_000) -> list[tuple[str, int, int, int]]:
+    """:func:`crossing_leaks` of the polyline kernel over ``n_rays`` rays in
+    all, shared among the random closed test profiles of
+    :func:`lathe_shape.tools.reference.test_profiles` (rays of
+    :func:`lathe_shape.tools.reference.random_rays` that start outside).
+    Returns ``(name, rays, hitting, leaks)`` per profile."""
+    rng = np.random.default_rng(seed)
+    profiles = ref.test_profiles(rng)
+    per_profile = n_rays // len(profiles) + 1
+    rows = []
+    for name, prof in profiles:
+        intersect = polyline_callback(build_polyline_data(*ref.segment_points(prof)))
+        n_leaks = hits = rays = 0
+        while rays < per_profile:
+            m = min(chunk, per_profile - rays)
+            # Oversample, then keep only rays starting outside the solid
+            o, d = ref.random_rays(rng, prof, 2 * m)
+            o = o.astype(np.float32).astype(np.float64)
+            d = d.astype(np.float32).astype(np.float64)
+            keep = ~ref.inside_profile(prof, o)
+            leak, n_hits = crossing_leaks(intersect, prof, o[keep][:m], d[keep][:m])
+            rays += len(leak)
+            hits += int(np.sum(n_hits > 0))
+            n_leaks += int(np.sum(leak))
+        rows.append((name, rays, hits, n_leaks))
+    return rows
+
+
+def parity_summary(name: str, counts: dict[str, int]) -> str:
+    """One line of :func:`scene_parity_leaks` counts: odd (leaking) rays of
+    the exact kernel and of the mesh, per hitting ray."""
+    parts = [f"{name:14s} rays {counts['rays']:9d}"]
+    for kind in ("exact", "mesh"):
+        hits, odd = counts[f"hitting_{kind}"], counts[f"odd_{kind}"]
+        parts.append(f"{kind}: hitting {hits:9d} odd {odd:5d} ({odd / max(hits, 1):.1e})"
+                     + (f" stuck {counts[f'stuck_{kind}']}" if counts[f"stuck_{kind}"] else ""))
+    return "  ".join(parts)
