@@ -151,6 +151,24 @@ def _points(name: str, value, m: int | None) -> np.ndarray:
     return a
 
 
+def _segments(start, end) -> tuple[np.ndarray, np.ndarray]:
+    """The segments' start and end points as float64 ``(m, 2)`` arrays; a
+    ValueError names the problem (shape, empty, negative radius, zero
+    length)."""
+    p0 = _points("start", start, None)
+    p1 = _points("end", end, len(p0))
+    if len(p0) == 0:
+        raise ValueError("build_polyline_data(): 'start' is empty (a profile needs segments)")
+    if np.any(p0[:, 0] < 0) or np.any(p1[:, 0] < 0):
+        raise ValueError("build_polyline_data(): negative radius in 'start' or 'end'")
+    length = np.hypot(*(p1 - p0).T)
+    if np.any(length <= 0):
+        k = int(np.argmin(length))
+        raise ValueError(f"build_polyline_data(): segment {k} has zero length "
+                         f"('start' equals 'end' at {p0[k].tolist()})")
+    return p0, p1
+
+
 def build_polyline_data(start, end, normal_start=None, normal_end=None) -> PolylineData:
     """Pack a polyline profile into opaque Dr.Jit buffers.
 
@@ -161,21 +179,12 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     segment (eq. 10); ``None`` means the segment's own geometric normal
     (eqs. 8-9: flat shading).
     """
-    p0 = _points("start", start, None)
-    p1 = _points("end", end, len(p0))
-    if len(p0) == 0:
-        raise ValueError("build_polyline_data(): 'start' is empty (a profile needs segments)")
+    p0, p1 = _segments(start, end)
     r0, z0 = p0.T
     r1, z1 = p1.T
-    if np.any(r0 < 0) or np.any(r1 < 0):
-        raise ValueError("build_polyline_data(): negative radius in 'start' or 'end'")
     dr_ = r1 - r0
     dz_ = z1 - z0
     length = np.hypot(dr_, dz_)
-    if np.any(length <= 0):
-        k = int(np.argmin(length))
-        raise ValueError(f"build_polyline_data(): segment {k} has zero length "
-                         f"('start' equals 'end' at {p0[k].tolist()})")
     # Supporting line n_r r + n_z z = c with the outward (left-hand) normal
     n_r = -dz_ / length
     n_z = dr_ / length
