@@ -435,20 +435,19 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
     odd = _crossing_parity(data, ray, seg, n_r, off1, off2, real, tol_u, active)
-    in1 = (s1 > ray.s_lo) & (s1 < s_best)
-    in2 = (s2 > ray.s_lo) & (s2 < s_best)
+    near1, near2 = off1 <= tol_u, off2 <= tol_u  # on the segment, up to tol_u
     # Even: both roots, when both are on the segment (an annulus, n_r = 0,
     # has one crossing: its double root is no pair); or, when the ray grazes
     # the segment towards a joint, the root well inside it alone (its partner
     # is lost to float32 rounding near the joint, past the tolerance).
-    both = real & (n_r != 0) & (dr.maximum(off1, off2) <= tol_u)
-    lone1 = real & (off1 <= -tol_u) & (off2 > tol_u)
-    lone2 = real & (off2 <= -tol_u) & (off1 > tol_u)
+    pair = real & (n_r != 0) & near1 & near2
     # Odd: the root nearer to the segment.
-    pick2 = dr.select(odd, off2 < off1, dr.select(both, in2 & (~in1 | (s2 < s1)), lone2))
-    even_ok = both | lone1 | lone2
-    one = odd & (dr.minimum(off1, off2) <= tol_u)
-    ok = dr.select(odd, one, even_ok) & dr.select(pick2, in2, in1)
+    take1 = dr.select(odd, near1 & (off1 <= off2), pair | (real & (off1 <= -tol_u) & ~near2))
+    take2 = dr.select(odd, near2 & (off2 < off1), pair | (real & (off2 <= -tol_u) & ~near1))
+    ok1 = take1 & (s1 > ray.s_lo) & (s1 < s_best)
+    ok2 = take2 & (s2 > ray.s_lo) & (s2 < s_best)
+    pick2 = ok2 & (~ok1 | (s2 < s1))
+    ok = ok1 | ok2
     return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok
 
 
