@@ -1,56 +1,52 @@
-"""Watertightness of the polyline kernel over >= 1e6 rays.
+"""Watertightness of the polyline kernel: spawn-ray parity walk, exact vs mesh.
 
-Rays start outside several random closed profiles (near and far, aimed at
-random points near the object, through the axis, and exactly at profile
-vertices, the hardest case). Each ray is followed through all its hits
-(restarting past every hit, see ``lathe_shape.tools.leaks.crossing_leaks``)
-and flagged as a leak when it changes sides of the surface without a
-reported hit. Prints the leak count and rate.
+Rays from outside the closed profiles of ``scenes/*.csv`` (a bottle, a
+sundae cup, a wine glass) are followed through every hit the way
+integrators do (``si.spawn_ray`` past each hit: the restart is offset along
+the geometric normal by Mitsuba's ray epsilon), once with the exact kernel
+and once with Mitsuba's own mesh of the same lathe (``--mesh-segments``), on
+the same rays: random ones, rays aimed exactly at profile vertices and rays
+grazing them (see ``lathe_shape.tools.leaks.parity_rays``). A ray that
+starts outside a closed solid must cross it an even number of times; an odd
+count is a leak. Prints the odd counts of both per profile and in total.
 
-Usage: ``python scripts/leak_test.py [n_rays] [--variant llvm_ad_rgb]``
+``--random-profiles`` runs the earlier measurement instead: random closed
+profiles, each free stretch of a ray between hits checked by a float64
+inside test (``lathe_shape.tools.leaks.crossing_leaks``).
+
+Usage: ``python scripts/leak_test.py [--rays 1e6] [--chunk 250000]
+[--mesh-segments 512] [--random-profiles] [--variant llvm_ad_rgb]``
 """
 
 from __future__ import annotations
 
-import numpy as np
+from pathlib import Path
 
-from lathe_shape.kernels.polyline import build_polyline_data
 from lathe_shape.tools import leaks
-from lathe_shape.tools import reference as ref
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
 
 def main() -> None:
     args = leaks.leak_test_arguments(__doc__.splitlines()[0])
-    n_rays = args.n_rays
-    rng = np.random.default_rng(2024)
-    profiles = ref.test_profiles(rng)
-    per_profile = n_rays // len(profiles) + 1
-    total_rays = total_hits = total_leaks = 0
-    for name, prof in profiles:
-        intersect = leaks.polyline_callback(build_polyline_data(*ref.segment_points(prof)))
-        n_leaks = hits = rays = 0
-        done = 0
-        while done < per_profile:
-            m = min(200_000, per_profile - done)
-            # Oversample, then keep only rays starting outside the solid
-            o, d = ref.random_rays(rng, prof, 2 * m)
-            o = o.astype(np.float32).astype(np.float64)
-            d = d.astype(np.float32).astype(np.float64)
-            keep = ~ref.inside_profile(prof, o)
-            o, d = o[keep][:m], d[keep][:m]
-            leak, n_hits = leaks.crossing_leaks(intersect, prof, o, d)
-            rays += len(o)
-            hits += int(np.sum(n_hits > 0))
-            n_leaks += int(np.sum(leak))
-            done += len(o)
-        print(f'{name:13s} rays {rays:8d} hitting {hits:8d} leaks {n_leaks}')
-        total_rays += rays
-        total_hits += hits
-        total_leaks += n_leaks
-    print(f'total: {total_rays} rays, {total_hits} hitting, '
-          f'{total_leaks} leaks, leak rate {total_leaks / total_hits:.2e} '
-          f'(per hitting ray)')
+    if args.random_profiles:
+        rows = leaks.random_profile_leaks(args.n_rays)
+        for name, rays, hits, n_leaks in rows:
+            print(f"{name:13s} rays {rays:8d} hitting {hits:8d} leaks {n_leaks}")
+        total = [sum(row[k] for row in rows) for k in (1, 2, 3)]
+        print(f"total: {total[0]} rays, {total[1]} hitting, {total[2]} leaks, "
+              f"leak rate {total[2] / max(total[1], 1):.2e} (per hitting ray)")
+        return
+    files = sorted(SCENES.glob("*.csv"))
+    totals: dict[str, int] = {}
+    for index, path in enumerate(files):
+        counts = leaks.scene_parity_leaks(str(path), args.n_rays // len(files), seed=index,
+                                          mesh_segments=args.mesh_segments, chunk=args.chunk)
+        for key, value in counts.items():
+            totals[key] = totals.get(key, 0) + value
+        print(leaks.parity_summary(path.stem, counts), flush=True)
+    print(leaks.parity_summary("total", totals))
 
 
-if __name__ == '__main__':
+if __name__ == "__main__":
     main()

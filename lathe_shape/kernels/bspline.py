@@ -83,7 +83,9 @@ digits to cancellation for a ray that starts far from the lathe, so the ray
 set-up of kernels/common.py first moves the origin to where the ray enters
 the lathe's bounding cylinder; all coefficients are built from that nearby
 origin (with a unit direction, so ``s`` is a length) and ``s`` is shifted
-back at the end.
+back at the end. All data and rays are in the unit frame of
+kernels/common.py (the profile divided by its size), so the pads and
+thresholds below are relative to the profile whatever the user's units.
 """
 
 from __future__ import annotations
@@ -96,7 +98,16 @@ import numpy as np
 
 from ..profiles.bspline import power_coefficients
 from . import common
-from .common import LatheData, LatheGeometry, LatheHit, LatheRay, opaque, threaded_bvh
+from .common import (
+    LatheData,
+    LatheGeometry,
+    LatheHit,
+    LatheRay,
+    opaque,
+    threaded_bvh,
+    to_unit_frame,
+    unit_frame,
+)
 
 __all__ = [
     "BSplineData",
@@ -159,7 +170,8 @@ class BSplineData(LatheData):
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
         bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
             cylinder of the whole curve (the union of the leaf boxes).
-        scale: opaque ``mi.Float``: bounding-box diagonal of the profile.
+        scale, inv_scale, z_shift: the unit frame (kernels/common.py), in
+            which ``seg``, ``leaf``, ``nodes`` and the cylinder are given.
     """
 
 
@@ -219,12 +231,15 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
     opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
     threaded BVH and the bounding cylinder. Call once per shape."""
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
+    pts = seg_ctrl.reshape(-1, 2)
+    # The curve lies in the control points' hull: their bounds size the frame
+    size, z_c, frame = unit_frame("build_bspline_data()", float(np.abs(pts[:, 0]).max()),
+                                  float(pts[:, 1].min()), float(pts[:, 1].max()))
+    seg_ctrl = (seg_ctrl - [0.0, z_c]) / size
     coef = power_coefficients(seg_ctrl)  # (n_seg, 2, 4)
     n_seg = len(coef)
-    pts = seg_ctrl.reshape(-1, 2)
-    scale = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) or 1.0
-    # Absolute padding: float32 rounding of the data and of the ray.
-    pad = 1e-5 * scale
+    # Padding (unit frame): float32 rounding of the data and of the ray.
+    pad = 1e-5 * float(np.linalg.norm(np.ptp(seg_ctrl.reshape(-1, 2), axis=0)))
     leaves, boxes = [], []
     for i in range(n_seg):
         for ta, tb in _leaf_pieces(coef[i]):
@@ -254,7 +269,7 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
         bound_r=opaque(float(boxes[:, 1].max())),
         bound_z_lo=opaque(float(boxes[:, 2].min())),
         bound_z_hi=opaque(float(boxes[:, 3].max())),
-        scale=opaque(scale),
+        **frame,
     )
 
 
@@ -596,8 +611,7 @@ def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m)
 
 @dr.syntax
 def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
-    dn = dr.norm(d)
-    ray = _Ray(data, o, d / dn, tmax * dn, mi.Bool(active) & (dn > 0))
+    ray = _Ray(data, o, d, tmax, active)
     active = ray.active
     node = mi.UInt32(ray.first) # current node of this ray's BVH copy
     end = ray.end               # one past this copy's last node
@@ -619,7 +633,7 @@ def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
     valid = hit & (best_s < ray.s_max)
     if not shadow:
         best_s, best_u = _polish(data, ray, best_s, best_u, best_seg, valid)
-    t = dr.select(valid, (best_s + ray.s_enter) / dn, dr.inf)
+    t = dr.select(valid, (best_s + ray.s_enter) * ray.t_scale, dr.inf)
     return BSplineHit(t=t, seg=best_seg, u=dr.clip(best_u, 0.0, 1.0), valid=valid)
 
 
@@ -691,7 +705,7 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     base = seg * _STRIDE
     R = [dr.gather(mi.Float, data.seg, base + k) for k in range(4)]
     Z = [dr.gather(mi.Float, data.seg, base + 4 + k) for k in range(4)]
-    Rt, dR = _polyval_d(R, u)
+    Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
     chord_r = R[1] + R[2] + R[3]
     chord_z = Z[1] + Z[2] + Z[3]
@@ -702,16 +716,17 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     inv = dr.rsqrt(dr.fma(tr, tr, tz * tz))
     nr, nz = -tz * inv, tr * inv
 
-    rho = dr.sqrt(dr.fma(p.x, p.x, p.y * p.y))
-    on_axis = rho <= 1e-7 * data.scale
-    cos_p = dr.select(on_axis, 1.0, p.x / rho)
-    sin_p = dr.select(on_axis, 0.0, p.y / rho)
+    q = to_unit_frame(data, p)
+    rho = dr.sqrt(dr.fma(q.x, q.x, q.y * q.y))
+    on_axis = rho <= 1e-7
+    cos_p = dr.select(on_axis, 1.0, q.x / rho)
+    sin_p = dr.select(on_axis, 0.0, q.y / rho)
     n = mi.Vector3f(nr * cos_p, nr * sin_p, nz)
 
     phi = dr.atan2(sin_p, cos_p)
     phi = dr.select(phi < 0, phi + 2 * math.pi, phi)
     n_seg = mi.Float(data.n_seg)
     uv = mi.Point2f(phi * (0.5 / math.pi), (mi.Float(seg) + u) / n_seg)
-    dp_du = mi.Vector3f(-Rt * sin_p, Rt * cos_p, 0.0) * (2 * math.pi)
-    dp_dv = mi.Vector3f(dR * cos_p, dR * sin_p, dZ) * n_seg
+    dp_du = mi.Vector3f(-Rt * sin_p, Rt * cos_p, 0.0) * (2 * math.pi * data.scale)
+    dp_dv = mi.Vector3f(dR * cos_p, dR * sin_p, dZ) * (n_seg * data.scale)
     return BSplineGeometry(n=n, sh_n=mi.Vector3f(n), uv=uv, dp_du=dp_du, dp_dv=dp_dv)

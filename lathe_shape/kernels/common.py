@@ -11,11 +11,23 @@ local geometry; this module holds the rest:
   profile data never recompiles a kernel;
 * :func:`threaded_bvh`: the stackless BVH over annular boxes in the (r, z)
   plane, stored four times with different child orders;
-* :class:`LatheRay`: ray set-up: clip against the bounding cylinder, move
-  the origin to the entry point, the ray's radial quadratic and its BVH copy;
+* :func:`unit_frame`: the profile's size and centre, by which every kind
+  stores its data divided (see "Units" below);
+* :class:`LatheRay`: ray set-up: into the unit frame, clip against the
+  bounding cylinder, move the origin to the entry point, the ray's radial
+  quadratic and its BVH copy;
 * :func:`enter_annular_box`, :func:`bvh_link`, :func:`bvh_next`: one step of
   the threaded traversal;
 * the result types :class:`LatheHit` and :class:`LatheGeometry`.
+
+Units. Whatever the user's units (a profile 1e-30 or 1e20 across), the
+kernels compute in a *unit frame*: each kind stores its profile data as
+``r / S``, ``(z - z_c) / S`` (``S`` the profile's size, ``z_c`` the centre of
+its z range; :func:`unit_frame`), and the ray set-up maps the local ray there
+(origin scaled and shifted, direction scaled to unit length), so every
+tolerance, pad and threshold of a kernel is relative to the profile and to
+``|d|``, and no square over- or underflows float32. Ray parameters found
+in the unit frame are scaled back with one multiply (``LatheRay.t_scale``).
 
 Float32 precision. A ray that starts far from the lathe (a camera ray, or a
 long shadow ray) has ``|o|`` much larger than the profile, and the constant
@@ -52,6 +64,8 @@ __all__ = [
     "opaque",
     "radial_interval",
     "threaded_bvh",
+    "to_unit_frame",
+    "unit_frame",
 ]
 
 #: Flag bit in a threaded-BVH link word marking a leaf (low bits: its index).
@@ -186,12 +200,41 @@ class LatheData:
     ``n_nodes``
         Opaque UInt32: nodes per copy.
     ``bound_r, bound_z_lo, bound_z_hi``
-        Opaque Float scalars: the padded bounding cylinder that clips rays.
+        Opaque Float scalars: the padded bounding cylinder that clips rays
+        (unit frame).
+    ``scale, inv_scale, z_shift``
+        Opaque Float scalars of the unit frame (see :func:`unit_frame`):
+        ``S``, ``1 / S`` and ``-z_c / S``; a local point ``p`` maps to
+        ``(p_x / S, p_y / S, p_z / S - z_c / S)``.
     """
 
     def __init__(self, **kwargs) -> None:
         for key, value in kwargs.items():
             setattr(self, key, value)
+
+
+def unit_frame(who: str, r_max: float, z_min: float, z_max: float) -> tuple[float, float, dict]:
+    """``(S, z_c, frame)`` of a profile with radii up to ``r_max`` and heights
+    in ``[z_min, z_max]``: its size ``S = max(r_max, z_max - z_min)``, the
+    centre ``z_c`` of its z range, and the opaque :class:`LatheData` fields
+    ``scale``, ``inv_scale`` and ``z_shift`` of that frame. The kind divides
+    its data by ``S`` after subtracting ``z_c``. A ValueError names ``who``
+    when float32 cannot represent the profile's size."""
+    size = float(max(r_max, z_max - z_min))
+    tiny = float(np.finfo(np.float32).tiny)
+    if not (np.isfinite(size) and 1e6 * tiny < size < 1e-6 / tiny):
+        raise ValueError(f"{who}: the profile's size {size:g} is outside what float32 "
+                         f"kernels can represent (about 1e-32 .. 1e32)")
+    z_c = 0.5 * (z_min + z_max)
+    frame = {"scale": opaque(size), "inv_scale": opaque(1.0 / size), "z_shift": opaque(-z_c / size)}
+    return size, z_c, frame
+
+
+def to_unit_frame(data: LatheData, p: mi.Point3f) -> mi.Point3f:
+    """A local point in the unit frame of ``data`` (one multiply-add per
+    component)."""
+    s = data.inv_scale
+    return mi.Point3f(p.x * s, p.y * s, dr.fma(p.z, s, data.z_shift))
 
 
 # ---------------------------------------------------------------------------
@@ -223,25 +266,32 @@ def radial_interval(a_xy, b_xy, c_xy, cross, rmax):
 
 
 class LatheRay:
-    """Per-ray constants of one traversal, origin moved into place.
+    """Per-ray constants of one traversal, in the unit frame, origin moved
+    into place.
 
-    The ray ``o + t d`` (local frame, any ``|d| > 0``) is clipped against the
-    padded bounding cylinder of ``data``; its origin is moved to the entry
-    point ``t = s_enter`` (see the module docstring) and from then on ``s =
-    t - s_enter`` is the ray parameter, in units of ``d``. Attributes:
+    The local ray ``o + t d`` (any ``|d| > 0``) is mapped to the unit frame
+    of ``data`` with a unit direction; ray parameters there are lengths in
+    that frame, ``t = s_frame * t_scale``. The ray is then clipped against
+    the padded bounding cylinder of ``data``; its origin is moved to the
+    entry point ``s_frame = s_enter`` (see the module docstring) and from
+    then on ``s = s_frame - s_enter`` is the ray parameter. Attributes:
 
-    ``o, d``: moved origin and direction; ``active``: lanes that meet the
-    cylinder before ``tmax``; ``s_enter``; ``s_lo = -s_enter`` (hits need
-    ``t > 0``), ``s_max = tmax - s_enter`` and ``s_hi`` (also before the
-    cylinder exit); ``a, b, c``: ``r(s)^2 = a s^2 + 2 b s + c``; ``cross``:
-    ``o_x d_y - o_y d_x``; ``inv_dz``: ``1 / d_z`` (nudged); ``first, end``:
-    the node range of this ray's BVH copy.
+    ``o, d``: moved origin and unit direction (unit frame); ``t_scale``;
+    ``tmax``: ``tmax`` in the unit frame; ``active``: lanes with a finite
+    origin and direction that meet the cylinder before ``tmax``;
+    ``s_enter``; ``s_lo = -s_enter`` (hits need ``t > 0``), ``s_max =
+    tmax - s_enter`` and ``s_hi`` (also before the cylinder exit); ``a, b,
+    c``: ``r(s)^2 = a s^2 + 2 b s + c``; ``cross``: ``o_x d_y - o_y d_x``;
+    ``inv_dz``: ``1 / d_z`` (nudged); ``first, end``: the node range of this
+    ray's BVH copy.
     """
 
     def __init__(self, data: LatheData, o: mi.Point3f, d: mi.Vector3f,
                  tmax: mi.Float, active: mi.Bool) -> None:
+        o, d, tmax, active = self._unit_frame(data, o, d, tmax, active)
         a_xy = dr.fma(d.x, d.x, d.y * d.y)
-        # z slab of the bounding cylinder (d_z = 0 nudged to avoid 0 * inf)
+        # z slab of the bounding cylinder (d_z = 0 nudged to avoid 0 * inf;
+        # |d| = 1 and the frame is unit sized, so the nudge is negligible)
         dz = dr.select(d.z == 0, 1e-30, d.z)
         inv_dz = dr.rcp(dz)
         zl = (data.bound_z_lo - o.z) * inv_dz
@@ -261,7 +311,8 @@ class LatheRay:
         self.o = mi.Point3f(dr.fma(d.x, s_enter, o.x),
                             dr.fma(d.y, s_enter, o.y),
                             dr.fma(d.z, s_enter, o.z))
-        self.d = mi.Vector3f(d)
+        self.d = d
+        self.tmax = tmax
         self.s_lo = -s_enter
         self.s_max = tmax - s_enter
         self.s_hi = dr.minimum(self.s_max, hi - s_enter)
@@ -278,6 +329,23 @@ class LatheRay:
         copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b <= 0, 0, 1)
         self.first = mi.UInt32(copy) * data.n_nodes
         self.end = self.first + data.n_nodes
+
+    def _unit_frame(self, data: LatheData, o, d, tmax, active):
+        """The ray in the unit frame: ``(o, unit d, tmax, active)``; sets
+        ``t_scale``. ``d`` is first divided by its largest component, so
+        that ``|d|^2`` cannot over- or underflow."""
+        big = dr.maximum(dr.maximum(dr.abs(d.x), dr.abs(d.y)), dr.abs(d.z))
+        d = d * dr.rcp(big)
+        norm = dr.norm(d)
+        d = d * dr.rcp(norm)
+        # Frame lengths per unit of t: |d| / S
+        per_t = big * norm * data.inv_scale
+        self.t_scale = dr.rcp(per_t)
+        o = to_unit_frame(data, o)
+        # A non-finite origin or direction never hits (and must not be
+        # clipped into the cylinder by inf - inf arithmetic)
+        finite = dr.isfinite(o.x + o.y + o.z) & dr.isfinite(per_t) & (per_t > 0)
+        return o, d, tmax * per_t, mi.Bool(active) & finite
 
     def reaches(self, lo: mi.Float, hi: mi.Float, r2: mi.Float) -> mi.Bool:
         """Whether ``r(s)^2`` reaches ``r2`` somewhere on ``[lo, hi]``: it is

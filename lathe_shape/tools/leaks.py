@@ -7,7 +7,12 @@ measurements follow rays through all their hits:
   :mod:`lathe_shape.tools.reference` checks every free stretch of the ray
   between hits, with :func:`polyline_callback` wrapping the kernel;
 * :func:`bspline_leak_rate` (B-spline lathes): a ray entering a closed
-  solid from outside must be crossed an even number of times.
+  solid from outside must be crossed an even number of times;
+* :func:`spawn_walk` and :func:`scene_parity_leaks` (any lathe, e.g. the
+  closed profiles of ``scenes/*.csv``): the same parity count, walked the
+  way integrators walk (``si.spawn_ray`` past every hit: the restart is
+  offset along the geometric normal by Mitsuba's ray epsilon), for the exact
+  kernel and for Mitsuba's own mesh of the lathe on the same rays.
 
 Needs an active JIT Mitsuba variant.
 """
@@ -22,21 +27,41 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.bspline import build_bspline_data, intersect_bspline
-from ..kernels.polyline import PolylineData, intersect_polyline, polyline_geometry
+from ..kernels.polyline import PolylineData, build_polyline_data, intersect_polyline, polyline_geometry
 from . import reference as ref
 
-__all__ = ["leak_test_arguments", "polyline_callback", "crossing_leaks", "bspline_leak_rate"]
+__all__ = [
+    "leak_test_arguments",
+    "polyline_callback",
+    "crossing_leaks",
+    "bspline_leak_rate",
+    "parity_rays",
+    "spawn_walk",
+    "scene_parity_leaks",
+    "random_profile_leaks",
+    "parity_summary",
+]
 
 
-def leak_test_arguments(description: str) -> argparse.Namespace:
-    """The leak test scripts' options (``n_rays`` in all, default 1e6, and
-    ``--variant``), parsed; selects the Mitsuba variant."""
+def leak_test_arguments(description: str, argv: list[str] | None = None) -> argparse.Namespace:
+    """The leak test scripts' options, parsed from ``argv`` (default: the
+    command line): the number of rays in all (``--rays N`` or positionally,
+    default 1e6), ``--variant``, and for ``scripts/leak_test.py``
+    ``--random-profiles`` (the crossing test on random profiles instead of
+    the spawn-ray parity walk through ``scenes/*.csv``), ``--chunk`` and
+    ``--mesh-segments``. Selects the Mitsuba variant."""
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("n_rays", nargs="?", type=float, default=1e6, help="rays in all (default 1e6)")
+    parser.add_argument("n_rays", nargs="?", type=float, default=None, help="rays in all (default 1e6)")
+    parser.add_argument("--rays", type=float, default=None, help="rays in all (default 1e6)")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
-    args = parser.parse_args()
+    parser.add_argument("--random-profiles", action="store_true",
+                        help="polylines: the float64 crossing test on random profiles")
+    parser.add_argument("--chunk", type=int, default=250_000, help="rays per batch (default 250000)")
+    parser.add_argument("--mesh-segments", type=int, default=512,
+                        help="azimuthal steps of the compared mesh (default 512)")
+    args = parser.parse_args(argv)
     mi.set_variant(args.variant)
-    args.n_rays = int(args.n_rays)
+    args.n_rays = int(args.rays or args.n_rays or 1e6)
     return args
 
 
@@ -147,3 +172,133 @@ def bspline_leak_rate(curve: str, n: int, seed: int) -> tuple[float, int]:
     count = np.array(count)
     entered = count > 0
     return np.mean(count[entered] % 2 == 1), int(entered.sum())
+
+
+# ---------------------------------------------------------------------------
+# Spawn-ray parity walk (exact kernel vs Mitsuba's mesh)
+# ---------------------------------------------------------------------------
+
+def parity_rays(start: np.ndarray, end: np.ndarray, rng: np.random.Generator,
+                n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` rays ``(o, d)`` (float64, unit ``d``) from outside the lathe of
+    the profile segments ``start -> end`` (``(m, 2)`` each): origins on a
+    sphere of twice the profile's size around it. In equal shares they aim at
+    random points of the bounding box, at random points of the surface,
+    exactly at profile vertices (the joints) and next to them (grazing
+    convex corners: offsets of 1e-7 to 1e-3 of the size)."""
+    points = np.concatenate([start, end])
+    r_max = points[:, 0].max()
+    z_lo, z_hi = points[:, 1].min(), points[:, 1].max()
+    size = max(r_max, z_hi - z_lo)
+    k = n // 4
+
+    def revolve(rz):
+        phi = rng.uniform(0, 2 * np.pi, len(rz))
+        return np.stack([rz[:, 0] * np.cos(phi), rz[:, 0] * np.sin(phi), rz[:, 1]], axis=1)
+
+    box = np.stack([rng.uniform(-r_max, r_max, k), rng.uniform(-r_max, r_max, k),
+                    rng.uniform(z_lo, z_hi, k)], axis=1)
+    seg = rng.integers(0, len(start), k)
+    f = rng.uniform(0, 1, (k, 1))
+    on_surface = revolve((1 - f) * start[seg] + f * end[seg])
+    vertex = revolve(start[rng.integers(0, len(start), k)])
+    m = n - 3 * k
+    jitter = rng.normal(size=(m, 3))
+    jitter *= size * 10.0 ** rng.uniform(-7, -3, (m, 1)) / np.linalg.norm(jitter, axis=1, keepdims=True)
+    near = revolve(start[rng.integers(0, len(start), m)]) + jitter
+    target = np.vstack([box, on_surface, vertex, near])
+    v = rng.normal(size=(n, 3))
+    o = 2 * size * v / np.linalg.norm(v, axis=1, keepdims=True) + [0, 0, 0.5 * (z_lo + z_hi)]
+    d = target - o
+    return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
+               max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Follow rays through all their hits as an integrator does.
+
+    ``intersect(ray, active) -> mi.SurfaceInteraction3f`` is the query under
+    test; after every hit the ray continues as ``si.spawn_ray(d)``. Returns
+    ``(crossings, stuck)`` per ray: the number of hits, and whether the ray
+    still hit something after ``max_hits``."""
+    ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
+    active = dr.full(mi.Bool, True, len(o))
+    count = dr.zeros(mi.UInt32, len(o))
+    for _ in range(max_hits):
+        si = intersect(ray, active)
+        active &= si.is_valid()
+        count += mi.UInt32(active)
+        ray = dr.select(active, si.spawn_ray(ray.d), ray)
+        dr.eval(ray, active, count)
+        if not dr.any(active):
+            break
+    return count.numpy().astype(np.int64), active.numpy()
+
+
+def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
+                       chunk: int = 250_000) -> dict[str, int]:
+    """Spawn-ray parity walk through the lathe of the profile file
+    ``filename`` (a closed solid, local frame = world), in chunks of
+    ``chunk`` rays: the exact kernel (``ray_intersect_exact``) and Mitsuba's
+    mesh of the lathe (``mesh_segments`` azimuthal steps, the scene's own
+    accelerator) on the same :func:`parity_rays`. Every ray starts outside,
+    so an odd number of crossings is a leak. Returns the counts ``rays``,
+    ``hitting_exact``, ``odd_exact``, ``stuck_exact`` and the same for
+    ``mesh``."""
+    scene = mi.load_dict({"type": "scene", "lathe": {"type": "lathe", "filename": filename,
+                                                     "mesh_segments": mesh_segments}})
+    lathe = scene.shapes()[0]
+    queries = {"exact": lathe.ray_intersect_exact,
+               "mesh": lambda ray, active: scene.ray_intersect(ray, active=active)}
+    start, end = lathe.profile.segment_points()
+    rng = np.random.default_rng(seed)
+    counts = {"rays": 0} | {f"{what}_{name}": 0 for name in queries for what in ("hitting", "odd", "stuck")}
+    for done in range(0, n, chunk):
+        o, d = parity_rays(start, end, rng, min(chunk, n - done))
+        counts["rays"] += len(o)
+        for name, query in queries.items():
+            crossings, stuck = spawn_walk(query, o, d)
+            counts[f"hitting_{name}"] += int(np.sum(crossings > 0))
+            counts[f"odd_{name}"] += int(np.sum(crossings % 2 == 1))
+            counts[f"stuck_{name}"] += int(np.sum(stuck))
+    return counts
+
+
+def random_profile_leaks(n_rays: int, seed: int = 2024,
+                         chunk: int = 200_000) -> list[tuple[str, int, int, int]]:
+    """:func:`crossing_leaks` of the polyline kernel over ``n_rays`` rays in
+    all, shared among the random closed test profiles of
+    :func:`lathe_shape.tools.reference.test_profiles` (rays of
+    :func:`lathe_shape.tools.reference.random_rays` that start outside).
+    Returns ``(name, rays, hitting, leaks)`` per profile."""
+    rng = np.random.default_rng(seed)
+    profiles = ref.test_profiles(rng)
+    per_profile = n_rays // len(profiles) + 1
+    rows = []
+    for name, prof in profiles:
+        intersect = polyline_callback(build_polyline_data(*ref.segment_points(prof)))
+        n_leaks = hits = rays = 0
+        while rays < per_profile:
+            m = min(chunk, per_profile - rays)
+            # Oversample, then keep only rays starting outside the solid
+            o, d = ref.random_rays(rng, prof, 2 * m)
+            o = o.astype(np.float32).astype(np.float64)
+            d = d.astype(np.float32).astype(np.float64)
+            keep = ~ref.inside_profile(prof, o)
+            leak, n_hits = crossing_leaks(intersect, prof, o[keep][:m], d[keep][:m])
+            rays += len(leak)
+            hits += int(np.sum(n_hits > 0))
+            n_leaks += int(np.sum(leak))
+        rows.append((name, rays, hits, n_leaks))
+    return rows
+
+
+def parity_summary(name: str, counts: dict[str, int]) -> str:
+    """One line of :func:`scene_parity_leaks` counts: odd (leaking) rays of
+    the exact kernel and of the mesh, per hitting ray."""
+    parts = [f"{name:14s} rays {counts['rays']:9d}"]
+    for kind in ("exact", "mesh"):
+        hits, odd = counts[f"hitting_{kind}"], counts[f"odd_{kind}"]
+        parts.append(f"{kind}: hitting {hits:9d} odd {odd:5d} ({odd / max(hits, 1):.1e})"
+                     + (f" stuck {counts[f'stuck_{kind}']}" if counts[f"stuck_{kind}"] else ""))
+    return "  ".join(parts)
