@@ -16,6 +16,7 @@ B-spline, degree-6 roots, exact normals).
 
 from __future__ import annotations
 
+import functools
 from typing import Protocol
 
 import mitsuba as mi
@@ -125,10 +126,12 @@ class BSplineSurface(_KernelSurface):
         self.profile = profile
         self.max_angle_deg = max_angle_deg
 
-    def sample_profile(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    @functools.cached_property
+    def profile_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Adaptive (r, z) samples of the curve, exact unit normals there, and
         v = (segment + t) / segments (the exact kernel's texture v). A closed
-        curve's last sample repeats its first (v = 1 there)."""
+        curve's last sample repeats its first (v = 1 there). Computed once:
+        the reference mesh's rings, and its memory estimate."""
         seg = self.profile.segment_controls
         samples = bs.sample_adaptive(seg, max_angle_deg=self.max_angle_deg)
         index = np.array([i for i, _ in samples])
@@ -155,7 +158,7 @@ class BSplineSurface(_KernelSurface):
         return points, normals, v
 
     def tessellate(self, steps: int) -> TriangleMesh:
-        points, normals, v = self.sample_profile()
+        points, normals, v = self.profile_samples
         start = np.arange(len(points) - 1)
         bands = np.stack([start, start + 1], axis=1)
         return revolve(points, normals, v, bands, steps)

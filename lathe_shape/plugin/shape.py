@@ -128,7 +128,7 @@ def _ring_bound(surface: PolylineSurface | BSplineSurface) -> int:
     """Profile rings of the reference mesh, at most (polylines: two per
     segment where every vertex is a crease; B-splines: their samples)."""
     if isinstance(surface, BSplineSurface):
-        return len(surface.sample_profile()[0])
+        return len(surface.profile_samples[0])
     return 2 * surface.profile.segment_count
 
 
