@@ -5,6 +5,9 @@ A grid of wine glasses (scenes/wine_glass.csv, mesh_segments 512) on a floor
 under a constant sky, rendered with ``lathe_path``. Every case runs in a
 fresh process, so its peak memory (ru_maxrss) is its own; the render time is
 that of a second render (the first pays the JIT compilation, printed too).
+Scenes load through `tools.scenes.load_string_in`, which loads scenes of more
+than 64 lathes sequentially (in parallel, hundreds of lathes exceed Python's
+recursion limit).
 
     python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy]
                                         [--resolution 128x128] [--spp 4] [--variant llvm_ad_rgb]
@@ -52,10 +55,11 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
     import mitsuba as mi
 
     from lathe_shape.cli.common import select_variant
+    from lathe_shape.tools.scenes import load_string_in
 
     select_variant(variant)
     start = time.perf_counter()
-    scene = mi.load_string(scene_text(count, reference, *size))
+    scene = load_string_in(ROOT, scene_text(count, reference, *size))
     load = time.perf_counter() - start
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
     times = []

@@ -247,3 +247,23 @@ def test_proxy_reference_mesh_renders_the_same_exactly():
     assert image_full.mean() > 0 and np.allclose(image_full, image_proxy, atol=1e-5)
     with pytest.raises(RuntimeError, match="parameter 'reference': unknown mode 'none'"):
         mi.load_dict({"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1", "reference": "none"})
+
+
+def test_scenes_of_many_lathes_load(tmp_path):
+    """Mitsuba loads shapes in parallel, and a thread waiting for Dr.Jit in
+    one lathe's constructor builds the next one inside that wait: hundreds of
+    lathes nested past Python's recursion limit. Such scenes load
+    sequentially."""
+    from lathe_shape.plugin.shape import scene_lathes
+    from lathe_shape.tools.scenes import SEQUENTIAL_LOAD_LATHES, load_scene, parallel_load
+
+    count = 1000
+    lathes = "".join(
+        f'<shape type="lathe"><string name="profile" value="0 0, 1 0, 1 1, 0 1"/>'
+        f'<string name="reference" value="proxy"/>'
+        f'<transform name="to_world"><translate x="{3 * i}"/></transform></shape>'
+        for i in range(count))
+    scene_file = tmp_path / "many.xml"
+    scene_file.write_text(f'<scene version="3.0.0">{lathes}</scene>')
+    assert not parallel_load(scene_file.read_text()) and count > SEQUENTIAL_LOAD_LATHES
+    assert len(scene_lathes(load_scene(scene_file))) == count
