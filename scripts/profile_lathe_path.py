@@ -54,12 +54,22 @@ def camera_rays(scene: mi.Scene, spp: int) -> mi.Ray3f:
 
 
 def throughput(query, ray: mi.Ray3f, repeat: int) -> float:
-    """Median Mrays/s of ``query(ray)`` (evaluated), after one warm-up."""
-    dr.eval(query(ray))
+    """Median Mrays/s of ``query(ray)`` (evaluated), after one warm-up. Each
+    run gets a new (opaque) ``maxt``: Dr.Jit would otherwise hand back the
+    result of the identical query it already evaluated."""
+    def fresh(k: int) -> mi.Ray3f:
+        copy = mi.Ray3f(ray)
+        copy.maxt = dr.opaque(mi.Float, 1e30 * (1 + k))
+        return copy
+
+    dr.eval(query(fresh(0)))
+    dr.sync_thread()
     times = []
-    for _ in range(repeat):
+    for k in range(repeat):
+        r = fresh(k + 1)
         start = time.perf_counter()
-        dr.eval(query(ray))
+        dr.eval(query(r))
+        dr.sync_thread()  # kernels run asynchronously: wait for them
         times.append(time.perf_counter() - start)
     return dr.width(ray.o) / median_spread(times)[0] * 1e-6
 
