@@ -103,6 +103,7 @@ from .common import (
     LatheGeometry,
     LatheHit,
     LatheRay,
+    box_rmin2,
     opaque,
     threaded_bvh,
     to_unit_frame,
@@ -253,7 +254,7 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
     boxes = np.array(boxes)
     # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
     def record(b):
-        return [b[1], b[0] * b[0], b[2], b[3]]
+        return [b[1], box_rmin2(b[0]), b[2], b[3]]
 
     recs, links, n_nodes = threaded_bvh(boxes, record, lambda k, b: record(b))
 

@@ -58,6 +58,7 @@ __all__ = [
     "LatheGeometry",
     "LatheHit",
     "LatheRay",
+    "box_rmin2",
     "bvh_link",
     "bvh_next",
     "enter_annular_box",
@@ -110,20 +111,42 @@ class LatheGeometry(metaclass=_VariantStruct):
         self.dp_dv = mi.Vector3f(0) if dp_dv is None else dp_dv
 
 
-def _median_split(box: np.ndarray, idx: np.ndarray):
-    """Median-split tree over the boxes ``idx`` of ``box`` (rows ``(rmin,
-    rmax, zmin, zmax)``): ``('leaf', k, bounds)`` or ``('node', bounds, axis,
-    lower, upper)``, ``lower`` holding the smaller centres along ``axis``
-    (0: r, 1: z), the axis along which the centres spread most."""
+def _revolved_area(rmin, rmax, zmin, zmax):
+    """Surface area (over 2 pi) of annular boxes revolved about the axis:
+    the chance that a random ray meets one is proportional to it (the
+    surface area heuristic)."""
+    return (rmax + rmin) * (zmax - zmin) + (rmax - rmin) * (rmax + rmin)
+
+
+def _sah_split(box: np.ndarray, idx: np.ndarray):
+    """Tree over the boxes ``idx`` of ``box`` (rows ``(rmin, rmax, zmin,
+    zmax)``): ``('leaf', k, bounds)`` or ``('node', bounds, axis, lower,
+    upper)``, ``lower`` holding the smaller centres along ``axis`` (0: r,
+    1: z). The split, along either axis between boxes sorted by centre,
+    minimises the surface area heuristic (:func:`_revolved_area` of each
+    side times its box count): fewer nodes visited per ray than a median
+    split."""
     bounds = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
     if len(idx) == 1:
         return ("leaf", int(idx[0]), bounds)
-    cr = 0.5 * (box[idx, 0] + box[idx, 1])
-    cz = 0.5 * (box[idx, 2] + box[idx, 3])
-    axis = 0 if np.ptp(cr) > np.ptp(cz) else 1
-    order = idx[np.argsort(cr if axis == 0 else cz, kind="stable")]
-    half = len(order) // 2
-    return ("node", bounds, axis, _median_split(box, order[:half]), _median_split(box, order[half:]))
+    best = None
+    count = np.arange(1, len(idx))
+    for axis in (0, 1):
+        centre = box[idx, 2 * axis] + box[idx, 2 * axis + 1]
+        order = idx[np.argsort(centre, kind="stable")]
+        b = box[order]
+        # Bounds of the first k boxes (prefix) and of the last n - k (suffix)
+        pre = [np.minimum.accumulate(b[:, 0]), np.maximum.accumulate(b[:, 1]),
+               np.minimum.accumulate(b[:, 2]), np.maximum.accumulate(b[:, 3])]
+        suf = [np.minimum.accumulate(b[::-1, 0])[::-1], np.maximum.accumulate(b[::-1, 1])[::-1],
+               np.minimum.accumulate(b[::-1, 2])[::-1], np.maximum.accumulate(b[::-1, 3])[::-1]]
+        cost = (_revolved_area(*(v[:-1] for v in pre)) * count
+                + _revolved_area(*(v[1:] for v in suf)) * count[::-1])
+        k = int(np.argmin(cost))
+        if best is None or cost[k] < best[0]:
+            best = (cost[k], axis, order, k + 1)
+    _, axis, order, half = best
+    return ("node", bounds, axis, _sah_split(box, order[:half]), _sah_split(box, order[half:]))
 
 
 def threaded_bvh(
@@ -133,7 +156,7 @@ def threaded_bvh(
 ) -> tuple[list, list, int]:
     """A stackless BVH over annular boxes in the (r, z) plane.
 
-    ``box`` is (n, 4) with rows ``(rmin, rmax, zmin, zmax)``. The median-split
+    ``box`` is (n, 4) with rows ``(rmin, rmax, zmin, zmax)``. The surface-area-heuristic
     tree is stored four times in pre-order with miss links, so that a ray can
     walk it with one index: copy ``2 * (d_z < 0) + (moving away from the
     axis)`` visits the lower child of a z split first when the ray goes up,
@@ -144,7 +167,7 @@ def threaded_bvh(
     is an inner node's miss link (global index of the next node after its
     subtree) or ``LEAF | index`` for a leaf; ``n_nodes`` per copy.
     """
-    tree = _median_split(np.asarray(box, dtype=np.float64), np.arange(len(box)))
+    tree = _sah_split(np.asarray(box, dtype=np.float64), np.arange(len(box)))
     records: list = []
     links: list = []
 
@@ -360,6 +383,14 @@ class LatheRay:
 # ---------------------------------------------------------------------------
 # One traversal step (Dr.Jit, traced)
 # ---------------------------------------------------------------------------
+
+def box_rmin2(rmin: float) -> float:
+    """The ``rmin2`` that :func:`enter_annular_box` takes for a box's inner
+    radius: ``rmin^2``, or -1 for a box reaching the axis. On a ray through
+    the axis, ``r(s)^2`` rounds to slightly below 0 there; a box that is
+    thin in z (an annulus's) could then be skipped although it is hit."""
+    return rmin * rmin if rmin > 0 else -1.0
+
 
 def enter_annular_box(ray: LatheRay, zmin, zmax, r_lo, r_hi, rmin2, s_best):
     """Whether the ray meets the annular box ``[rmin, rmax] x [zmin, zmax]``

@@ -64,6 +64,7 @@ from .common import (
     LatheGeometry,
     LatheHit,
     LatheRay,
+    box_rmin2,
     bvh_link,
     bvh_next,
     enter_annular_box,
@@ -110,7 +111,8 @@ class PolylineData(LatheData):
 
     ``nodes``
         Float buffer, 8 floats per node of the four threaded BVH copies.
-        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)``; leaf:
+        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)`` (rmin^2 as
+        ``box_rmin2``); leaf:
         ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``seg_geo``
         Float buffer, ``(n_r, n_z, dr * total / L, dz * total / L)`` per
@@ -212,7 +214,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
         np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
                   np.maximum(z0, z1) + pad], axis=1),
         # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
-        lambda b: [1.0, 0.0, b[1], b[0] * b[0], b[2], b[3], 0.0, 0.0],
+        lambda b: [1.0, 0.0, b[1], box_rmin2(b[0]), b[2], b[3], 0.0, 0.0],
         lambda k, b: leaf_rec[k],
     )
 
