@@ -303,21 +303,11 @@ class _Ray(LatheRay):
         self.dz_oy = self.d.z * self.o.y
 
 
-def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
-           active: mi.Bool):
-    """Process one node: box test for inner nodes, segment test for leaves.
-
-    Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
-    whose segment is hit at ``s_hit < s_best``.
-    """
-    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
-    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
-    link, is_leaf, seg = bvh_link(data.links, node, active)
-    n_r, n_z, c = rec0.x, rec0.y, rec0.z
+def _roots(ray: _Ray, n_r, n_z, c):
+    """Roots ``(s1, s2)`` of the quadratic of eqs. 1 and 3 for ``n_r^2 r(s)^2
+    = (c - n_z z(s))^2``, its discriminant (up to a positive factor) and
+    whether the roots are real within the tolerance."""
     o, d = ray.o, ray.d
-
-    # Quadratic of eqs. 1 and 3 for n_r^2 r(s)^2 = (h0 + h1 s)^2 (inner nodes use
-    # the cylinder r = rmax: n_r = 1, n_z = 0, c = rmax)
     nr2 = n_r * n_r
     h0 = dr.fma(-n_z, o.z, c)
     h1 = -n_z * d.z
@@ -333,21 +323,50 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     has_root = wl - cr >= -ray.tol_d
     root = dr.abs(n_r) * dr.sqrt(dr.maximum(disc, 0))
     q = -(qb + dr.copysign(root, qb))
-    s1 = q / qa
-    s2 = qc / q
+    return q / qa, qc / q, disc, has_root
 
-    # Inner node: the roots bound the radial interval of the box
-    inside = ray.c <= c * c
+
+def _enter_inner(ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
+    """Whether the ray enters an inner node's box before ``s_best``. Its
+    quadratic, with ``(n_r, n_z, c) = (1, 0, rmax)``, is the cylinder ``r =
+    rmax``: the roots ``s1``, ``s2`` bound the box's radial interval."""
+    inside = ray.c <= rec0.z * rec0.z
     r_lo = dr.select(ray.parallel, dr.select(inside, -dr.inf, dr.inf),
                      dr.select(has_root, dr.minimum(s1, s2), dr.inf))
     r_hi = dr.select(ray.parallel, dr.inf, dr.maximum(s1, s2))
-    box_hit = enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
+    return enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
 
-    # Leaf: the nearer root on the segment (half-open joints, see _segment_hit)
-    s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, s_best,
-                                    active & is_leaf)
-    hit = active & is_leaf & ok
-    return bvh_next(node, link, is_leaf, box_hit), s_hit, u_hit, seg, hit
+
+@dr.syntax
+def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
+           active: mi.Bool):
+    """Process one node: box test for inner nodes, segment test for leaves.
+
+    Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
+    whose segment is hit at ``s_hit < s_best``. Each test is a symbolic
+    ``if``: a packet whose lanes are all at leaves (or all at inner nodes)
+    skips the other one.
+    """
+    rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
+    rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
+    link, is_leaf, seg = bvh_link(data.links, node, active)
+    leaf = active & is_leaf
+    # One quadratic serves both kinds of node (the leaf's segment, the inner
+    # node's cylinder)
+    s1, s2, disc, has_root = _roots(ray, rec0.x, rec0.y, rec0.z)
+
+    entered = mi.Bool(False)  # inner node: its box is entered
+    if active & ~is_leaf:
+        entered = _enter_inner(ray, rec0, rec1, s1, s2, has_root, s_best)
+
+    s_hit = mi.Float(s1)      # leaf: the nearer root on the segment
+    u_hit = mi.Float(0.0)     # ... its fraction along the segment
+    hit = mi.Bool(False)      # ... and whether it is a hit before s_best
+    if leaf:
+        # Half-open joints, see _segment_hit
+        s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, s_best, leaf)
+        hit = leaf & ok
+    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit
 
 
 def _side_terms(ray: _Ray, r, z):
