@@ -522,15 +522,21 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     """Parse ``argv`` and run ``body(args)``; every exception becomes a
     one-line message (see :func:`error_message`): ``PROG: error: ...`` and
     status 2, or on Ctrl-C ``PROG: interrupted`` and status 130. When a
-    render is still running in a worker (:func:`interruptible`), the process
-    ends here, with that status, instead of waiting for the render."""
+    render is still running in a worker (:func:`interruptible`), or when a
+    command run from the command line was interrupted, the process ends
+    here, with that status, without waiting for the render or for the
+    interpreter's shutdown."""
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:
         raise  # argparse: --help, or a usage error already reported
     except BaseException as e:
         status = _report(prog, e)
-    if not _all_work_done():
+    # A command run from the command line (``argv`` None) that was
+    # interrupted ends here too: a Ctrl-C that lands while Dr.Jit or
+    # Mitsuba threads wind down can otherwise abort the interpreter's
+    # shutdown ("terminate called without an active exception", status 134).
+    if not _all_work_done() or (status == 130 and argv is None):
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(status)
