@@ -63,7 +63,7 @@ import time
 from collections.abc import Callable
 from typing import TextIO, TypeVar
 
-from ..plugin.reference_mesh import available_memory
+from ..memory import available_memory, format_bytes
 
 __all__ = [
     "DEFAULT_VARIANT",
@@ -306,15 +306,6 @@ def check_render_options(args: argparse.Namespace) -> None:
     if args.resolution is not None:
         parse_resolution(args.resolution)
     parse_defines(getattr(args, "defines", None))
-
-
-def format_bytes(count: float) -> str:
-    """``3.2e9`` -> ``"3.2 GB"`` (decimal units)."""
-    for unit in ("bytes", "kB", "MB", "GB", "TB"):
-        if count < 1000 or unit == "TB":
-            return f"{count:.0f} {unit}" if unit == "bytes" else f"{count:.1f} {unit}"
-        count /= 1000
-    raise AssertionError("unreachable")
 
 
 def check_render_budget(width: int, height: int, spp: int, available: int | None = None) -> None:

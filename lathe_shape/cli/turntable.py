@@ -227,7 +227,8 @@ def open_job(args: argparse.Namespace) -> Job:
 
     check_at_least("--count", args.count, 1)
     check_render_options(args)
-    check_between("--seed", args.seed + args.count - 1, 0, UINT32_MAX)  # the last frame's seed
+    if args.seeds == "frame":
+        check_between("--seed", args.seed + args.count - 1, 0, UINT32_MAX)  # the last frame's seed
     check_at_least("--threads", args.threads, 1)
     if not args.fps > 0:
         raise CliError(f"--fps must be positive, got {args.fps:g}")

@@ -11,13 +11,12 @@ lights sample points on the mesh.
 
 from __future__ import annotations
 
-import os
+from ..memory import available_memory
 
 __all__ = [
     "BYTES_PER_VERTEX",
     "PROXY_SEGMENTS",
     "REFERENCE_MODES",
-    "available_memory",
     "check_mesh_budget",
     "reference_steps",
 ]
@@ -46,22 +45,6 @@ def reference_steps(mode: str, mesh_segments: int, who: str) -> int:
             f"{', '.join(REFERENCE_MODES)})"
         )
     return min(mesh_segments, PROXY_SEGMENTS) if mode == "proxy" else mesh_segments
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available now without swapping (``MemAvailable`` of
-    ``/proc/meminfo``; else the free physical pages), None if unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, OSError, ValueError):
-        return None
 
 
 def check_mesh_budget(rings: int, steps: int, who: str, available: int | None = None) -> None:

@@ -21,7 +21,6 @@ __all__ = [
     "points_text",
     "replace_profile",
     "scene_integrator",
-    "set_defaults",
     "set_film_size",
 ]
 
@@ -119,20 +118,6 @@ def set_film_size(xml_text: str, size: tuple[int, int], source: str = "scene") -
     for start, end, replacement in sorted(edits, reverse=True):
         data = data[:start] + replacement + data[end:]
     return data.decode("utf-8")
-
-
-def set_defaults(xml_text: str, source: str = "scene", **values: object) -> str:
-    """The scene text with the value of each named ``<default>`` replaced
-    (e.g. ``set_defaults(text, spp=16, mesh_segments=64)``); a name the
-    scene does not declare is added as a new ``<default>``."""
-    root = _parse_xml(xml_text, source)
-    for name, value in values.items():
-        node = next((d for d in root.findall("default") if d.get("name") == name), None)
-        if node is None:
-            node = ET.Element("default", {"name": name})
-            root.insert(0, node)
-        node.set("value", str(value))
-    return ET.tostring(root, encoding="unicode")
 
 
 def points_text(points) -> str:

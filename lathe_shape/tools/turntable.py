@@ -232,7 +232,7 @@ class Turntable:
                     + " (no to_world, vertex positions or position to rotate): it stays fixed"
                 )
         elif self.mode == "orbit":
-            params = mi.traverse(self.scene)
+            params = self._params = mi.traverse(self.scene)  # kept: posed every frame
             self._sensor_key = _sensor_to_world_key(params, self.sensor)
             if self._sensor_key is None:
                 raise TurntableError(f"the sensor '{self.sensor.class_name()}' has no to_world to orbit")
@@ -273,7 +273,7 @@ class Turntable:
                 geometry.accept_moves(self.scene)
         else:
             matrix = orbit_matrix(self.sensor_to_world, self.lathe_to_world, angle_deg)
-            params = mi.traverse(self.scene)
+            params = self._params
             params[self._sensor_key] = mi.AffineTransform4f(matrix.astype(np.float32))
             params.update()
         self._angle = angle_deg
