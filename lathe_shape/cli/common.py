@@ -283,17 +283,20 @@ def open_scene(
     defines: list[str] | None = None,
     resolution: str | None = None,
     extra_defines: dict[str, str] | None = None,
+    edit: Callable[[str, str], str] | None = None,
 ) -> object:
     """What every command-line tool does first: select ``variant``, register
     the plugins, parse ``-D key=value`` items and a ``WxH`` resolution, load
-    the scene. Raises :class:`SceneError` with a clear message."""
+    the scene (edited by ``edit(text, path)``, see
+    :func:`..tools.scenes.load_scene`). Raises :class:`SceneError` with a
+    clear message."""
     from ..tools.scenes import load_scene
 
     select_variant(variant)
     values = parse_defines(defines)
     values.update(extra_defines or {})
     size = parse_resolution(resolution) if resolution else None
-    return load_scene(path, values, size)
+    return load_scene(path, values, size, edit)
 
 
 def check_render_options(args: argparse.Namespace) -> None:

@@ -188,31 +188,10 @@ class Job:
         }
 
 
-def open_box_filtered_scene(args: argparse.Namespace) -> object:
-    """The scene of ``args`` (variant, -D, --resolution) with box
-    reconstruction filters, for denoising (see :mod:`..tools.denoise`)."""
-    from ..tools.denoise import box_filter_xml
-    from ..tools.scenes import SceneError, load_string_in, set_film_size
-    from .common import parse_defines, parse_resolution, select_variant
-
-    select_variant(args.variant)
-    if not os.path.isfile(args.scene):
-        raise SceneError(f"scene file '{args.scene}' not found")
-    with open(args.scene, encoding="utf-8") as f:
-        text = box_filter_xml(f.read(), args.scene)
-    if args.resolution:
-        text = set_film_size(text, parse_resolution(args.resolution), args.scene)
-    folder = os.path.dirname(os.path.abspath(args.scene))
-    try:
-        return load_string_in(folder, text, **parse_defines(args.defines))
-    except RuntimeError as e:
-        raise SceneError(f"{args.scene}: could not load the scene:\n{e}") from None
-
-
 def open_job(args: argparse.Namespace) -> Job:
     """Check the options, load and pose the scene, create the output folder
     (last: a failed job leaves nothing behind)."""
-    from ..tools.denoise import Denoiser, choose_backend
+    from ..tools.denoise import Denoiser, box_filter_xml, choose_backend
     from ..tools.scenes import integrator_name
     from ..tools.turntable import Turntable
     from ..tools.video import require_video
@@ -237,10 +216,8 @@ def open_job(args: argparse.Namespace) -> Job:
         if getattr(args, fmt):
             require_video(fmt, what=f"--{fmt}")
     backend, note = choose_backend(args.variant) if args.denoise else ("", "")
-    if args.denoise:
-        scene = open_box_filtered_scene(args)
-    else:
-        scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
+    scene = open_scene(args.scene, args.variant, args.defines, args.resolution,
+                       edit=box_filter_xml if args.denoise else None)
     turntable = Turntable(scene, args.mode, args.object, scene_path=args.scene, guides=args.denoise)
     sensor = turntable.sensor
     size = tuple(int(v) for v in sensor.film().size())

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from xml.parsers import expat
 
 import mitsuba as mi
@@ -254,9 +255,11 @@ def load_scene(
     path: str | os.PathLike,
     defines: dict[str, str] | None = None,
     resolution: tuple[int, int] | None = None,
+    edit: Callable[[str, str], str] | None = None,
 ) -> mi.Scene:
     """Load a Mitsuba XML scene (after ``import lathe_shape`` registered the
-    plugins), optionally overriding the film resolution.
+    plugins), optionally edited by ``edit(text, path)`` (e.g. the box filters
+    of denoised turntables) and with the film resolution overridden.
 
     Errors name ``path`` and the line and column in it, with or without
     ``resolution``: the override edits only the films' sizes (see
@@ -266,11 +269,13 @@ def load_scene(
     text = read_scene_text(path)
     defines = dict(defines or {})
     try:
+        edited = text if edit is None else edit(text, path)
         try:
-            edited = None if resolution is None else set_film_size(text, resolution, path)
+            if resolution is not None:
+                edited = set_film_size(edited, resolution, path)
         except SceneSyntaxError:
-            edited = None  # Mitsuba reports where the syntax error is
-        if edited is None:
+            edited = text  # Mitsuba reports where the syntax error is
+        if edited is text:
             scene = mi.load_file(path, parallel=parallel_load(text), **defines)
         else:
             scene = load_string_in(os.path.dirname(os.path.abspath(path)), edited,
