@@ -163,8 +163,7 @@ def write_comparison(args: argparse.Namespace, out: str, spp: int,
     temporary name renamed when complete; returns the difference's scale."""
     import mitsuba as mi
 
-    from ..tools.frames import atomic_path
-    from ..tools.images import write_images
+    from ..tools.images import atomic_path, write_images
 
     for name, (rgb, seconds) in images.items():
         metadata = {"spp": int(spp), "integrator": RUNS[name]["type"], "seed": int(args.seed),

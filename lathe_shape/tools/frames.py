@@ -20,26 +20,22 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import OpenEXR
 
-from .images import read_exr, write_exr, write_png
+from .images import read_exr, write_images
 
 __all__ = [
     "JOB_KEYS",
     "Frame",
-    "atomic_path",
     "frame_angle",
     "frame_pngs",
     "frame_state",
     "frame_stem",
     "plan_frames",
     "write_frame",
-    "write_layered_exr",
 ]
 
 #: Header attributes a finished frame must match to be skipped on resume.
@@ -116,49 +112,13 @@ def _same(stored: object, value: object) -> bool:
     return stored == value
 
 
-@contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[str]:
-    """A temporary name to write ``path`` under: renamed to ``path`` when the
-    ``with`` block completes, removed when it fails. The name is hidden,
-    unique to this process and keeps the extension (Mitsuba and imageio pick
-    the format from it)."""
-    folder, name = os.path.split(os.fspath(path))
-    stem, ext = os.path.splitext(name)
-    tmp = os.path.join(folder, f".{stem}.{os.getpid()}.tmp{ext}")
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def write_layered_exr(path: str | os.PathLike, rgb: np.ndarray, layers: dict[str, np.ndarray],
-                      metadata: dict[str, object] | None = None) -> None:
-    """A half-float ZIP EXR with ``rgb`` as R, G, B and each (H, W, 3) image
-    of ``layers`` as ``NAME.R``, ``NAME.G``, ``NAME.B``; ``metadata`` entries
-    become header attributes (numbers as numbers, the rest as text)."""
-    header: dict[str, object] = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    header.update({k: v if isinstance(v, (int, float)) else str(v) for k, v in (metadata or {}).items()})
-    channels = {"RGB": rgb, **layers}
-    half = {name: np.ascontiguousarray(np.asarray(image)[..., :3], dtype=np.float16)
-            for name, image in channels.items()}
-    with OpenEXR.File(header, half) as exr:
-        exr.write(os.fspath(path))
-
-
 def write_frame(frame: Frame, rgb: np.ndarray, metadata: dict[str, object],
                 noisy: np.ndarray | None = None) -> None:
     """Write a frame's half-float EXR (with ``metadata``; ``noisy``, when
     given, as the layer ``noisy``) and sRGB PNG atomically, the EXR last: a
     frame whose EXR exists is complete."""
-    with atomic_path(frame.exr) as tmp_exr:
-        with atomic_path(frame.png) as tmp_png:
-            write_png(tmp_png, rgb)
-            if noisy is None:
-                write_exr(tmp_exr, rgb, metadata, half=True)
-            else:
-                write_layered_exr(tmp_exr, rgb, {"noisy": noisy}, metadata)
+    write_images(os.path.splitext(frame.exr)[0], rgb, metadata, half=True,
+                 layers=None if noisy is None else {"noisy": noisy})
 
 
 def frame_pngs(out_dir: str | os.PathLike, count: int) -> list[str]:

@@ -4,12 +4,39 @@ and the one image-error metric every tool, script and test uses."""
 from __future__ import annotations
 
 import os
-from contextlib import nullcontext
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import OpenEXR
 
-__all__ = ["write_exr", "read_exr", "write_png", "write_images", "to_srgb8", "image_errors", "relative_error"]
+__all__ = [
+    "atomic_path",
+    "image_errors",
+    "read_exr",
+    "relative_error",
+    "to_srgb8",
+    "write_exr",
+    "write_images",
+    "write_png",
+]
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[str]:
+    """A temporary name to write ``path`` under: renamed to ``path`` when the
+    ``with`` block completes, removed when it fails. The name is hidden,
+    unique to this process and keeps the extension (Mitsuba and imageio pick
+    the format from it)."""
+    folder, name = os.path.split(os.fspath(path))
+    stem, ext = os.path.splitext(name)
+    tmp = os.path.join(folder, f".{stem}.{os.getpid()}.tmp{ext}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def write_exr(
@@ -17,20 +44,24 @@ def write_exr(
     rgb: np.ndarray,
     metadata: dict[str, object] | None = None,
     half: bool = False,
+    layers: dict[str, np.ndarray] | None = None,
 ) -> None:
     """Write an (H, W, 3) linear RGB image as a ZIP-compressed scanline EXR.
 
     ``metadata`` entries (str, int, float) become EXR header attributes;
-    ``half`` stores 16-bit floats.
+    ``half`` stores 16-bit floats; each (H, W, 3) image of ``layers`` is
+    stored as ``NAME.R``, ``NAME.G``, ``NAME.B``.
     """
-    pixels = np.ascontiguousarray(np.asarray(rgb)[..., :3], dtype=np.float16 if half else np.float32)
+    dtype = np.float16 if half else np.float32
+    channels = {name: np.ascontiguousarray(np.asarray(image)[..., :3], dtype=dtype)
+                for name, image in {"RGB": rgb, **(layers or {})}.items()}
     header: dict[str, object] = {
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
     }
     for key, value in (metadata or {}).items():
         header[key] = value if isinstance(value, (int, float)) else str(value)
-    with OpenEXR.File(header, {"RGB": pixels}) as exr:
+    with OpenEXR.File(header, channels) as exr:
         exr.write(os.fspath(path))
 
 
@@ -61,18 +92,19 @@ def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
 
 
 def write_images(stem: str, rgb: np.ndarray, metadata: dict[str, object] | None = None,
-                 png: bool = True) -> list[str]:
+                 png: bool = True, half: bool = False,
+                 layers: dict[str, np.ndarray] | None = None) -> list[str]:
     """Write ``STEM.exr`` (with ``metadata``) and, when ``png``, the sRGB
     preview ``STEM.png``, each under a temporary name renamed when both are
     complete (the EXR last), so that an interrupted write leaves no partial
-    file; returns the paths written."""
-    from .frames import atomic_path  # (frames imports this module)
+    file; returns the paths written. ``half`` and ``layers`` as in
+    :func:`write_exr`."""
 
     paths = [stem + ".exr", stem + ".png"] if png else [stem + ".exr"]
     with atomic_path(paths[0]) as tmp_exr, (atomic_path(paths[1]) if png else nullcontext()) as tmp_png:
         if tmp_png:
             write_png(tmp_png, rgb)
-        write_exr(tmp_exr, rgb, metadata)
+        write_exr(tmp_exr, rgb, metadata, half, layers)
     return paths
 
 

@@ -11,7 +11,7 @@ from types import ModuleType
 
 import numpy as np
 
-from .frames import atomic_path
+from .images import atomic_path
 
 __all__ = ["FORMATS", "VideoError", "require_video", "write_video"]
 
