@@ -187,6 +187,21 @@ def test_denoiser_choice(tmp_path, monkeypatch, capsys):
     assert not (tmp_path / "x").exists()
 
 
+def test_prefiltered_guides_are_closer_to_clean_ones():
+    # Smooth guides plus per-pixel noise, as behind glass at few samples.
+    y, x = np.mgrid[0:64, 0:64] / 63.0
+    albedo = np.stack([0.2 + 0.6 * x, 0.5 + 0.0 * y, 0.8 - 0.5 * y], axis=-1).astype(np.float32)
+    normal = np.stack([x - 0.5, y - 0.5, np.ones_like(x)], axis=-1)
+    normal = (normal / np.linalg.norm(normal, axis=-1, keepdims=True)).astype(np.float32)
+    rng = np.random.default_rng(1)
+    noisy_albedo = albedo + rng.normal(0.0, 0.1, albedo.shape).astype(np.float32)
+    noisy_normal = normal + rng.normal(0.0, 0.1, normal.shape).astype(np.float32)
+    clean_albedo, clean_normal = dn.prefilter_guides(noisy_albedo, noisy_normal)
+    assert clean_albedo.shape == albedo.shape and clean_normal.dtype == np.float32
+    assert np.abs(clean_albedo - albedo).mean() < 0.5 * np.abs(noisy_albedo - albedo).mean()
+    assert np.abs(clean_normal - normal).mean() < 0.5 * np.abs(noisy_normal - normal).mean()
+
+
 def test_frame_writer():
     done = []
     with FrameWriter() as writer:
