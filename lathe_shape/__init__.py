@@ -13,10 +13,40 @@ Call :func:`register` by hand only if plugins were cleared.
 
 from __future__ import annotations
 
-import mitsuba as mi
+import os as _os
+import signal as _signal
+import sys as _sys
 
-from .plugin.variants import MIN_LLVM_VERSION, check_llvm, on_variant_change, register
-from .profiles import Profile, ProfileError, make_profile
+
+def _command_name() -> str | None:
+    """``lathe-render`` etc. when this process is one of the package's
+    commands (a console script, or ``python -m lathe_shape.cli.NAME``)."""
+    commands = ("render", "turntable", "compare", "profile")
+    if _sys.argv and _os.path.basename(_sys.argv[0]) in {f"lathe-{c}" for c in commands}:
+        return _os.path.basename(_sys.argv[0])
+    argv = getattr(_sys, "orig_argv", [])
+    for flag, module in zip(argv, argv[1:], strict=False):
+        if flag == "-m" and module in {f"lathe_shape.cli.{c}" for c in commands}:
+            return "lathe-" + module.rsplit(".", 1)[1]
+    return None
+
+
+def _interrupted_while_importing(signum, frame) -> None:  # noqa: ARG001 (signal handler)
+    """A Ctrl-C while a command still imports (Mitsuba and Dr.Jit take a few
+    tenths of a second): the command's one-line message, no traceback. The
+    command restores Python's handler when it starts (cli/common.py)."""
+    _sys.stderr.write(f"{_command_name()}: interrupted\n")
+    _sys.stderr.flush()
+    _os._exit(130)
+
+
+if _command_name() and _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
+    _signal.signal(_signal.SIGINT, _interrupted_while_importing)
+
+import mitsuba as mi  # noqa: E402 (after the import-time Ctrl-C handler)
+
+from .plugin.variants import MIN_LLVM_VERSION, check_llvm, on_variant_change, register  # noqa: E402
+from .profiles import Profile, ProfileError, make_profile  # noqa: E402
 
 __all__ = [
     "MIN_LLVM_VERSION",

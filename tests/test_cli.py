@@ -146,6 +146,31 @@ def test_ctrl_c_during_render(tmp_path, integrator):
     assert latency < 5.0, f"exit {latency:.2f} s after SIGINT"
 
 
+@pytest.mark.parametrize("delay", [0.06, 0.12, 0.2])
+def test_ctrl_c_while_importing(tmp_path, delay):
+    """A Ctrl-C while the command is still importing Mitsuba and Dr.Jit:
+    the one-line message, no traceback (or, before Python runs at all, the
+    signal's default end), and no output."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lathe_shape.cli.render", "--variant", VARIANT, str(SCENES / "wine_glass.xml"),
+         "-o", str(tmp_path), "--spp", "100000", "--resolution", "64x64", "-D", "mesh_segments=32"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    try:
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert "Traceback" not in stderr and "Fatal" not in stderr, stderr
+    assert proc.returncode in (130, -signal.SIGINT), stderr
+    if proc.returncode == 130:
+        assert stderr.strip() == "lathe-render: interrupted"
+    assert os.listdir(tmp_path) == []
+
+
 #: A scene with a comment before <scene> and a film: Mitsuba's line numbers
 #: must be the file's also when --resolution edits the film.
 LINE_SCENE = """<!--

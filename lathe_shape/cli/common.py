@@ -520,6 +520,12 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     command run from the command line was interrupted, the process ends
     here, with that status, without waiting for the render or for the
     interpreter's shutdown."""
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler and \
+            threading.current_thread() is threading.main_thread() and \
+            getattr(signal.getsignal(signal.SIGINT), "__module__", None) == "lathe_shape":
+        # Importing the package installed a quiet exit for Ctrl-C; from here
+        # on an interrupt is a KeyboardInterrupt reported by _report.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:
