@@ -185,7 +185,7 @@ class BSplineSurface(_KernelSurface):
         return revolve(points, normals, v, bands, steps)
 
     def _build_data(self) -> BSplineData:
-        return build_bspline_data(self.profile.segment_controls)
+        return build_bspline_data(self.profile.segment_controls, free_ends=self.profile.open_sheet)
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return bspline_geometry(self.data, p, seg, u)
@@ -205,7 +205,8 @@ class SorSurface(BSplineSurface):
         return self.profile.derivative(index, t)
 
     def _build_data(self) -> BSplineData:
-        return build_cubic_data(self.profile.coefficients, r_squared=True)
+        return build_cubic_data(self.profile.coefficients, r_squared=True,
+                                free_ends=self.profile.open_sheet)
 
 
 def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):

@@ -229,14 +229,16 @@ def _bezier(p: np.ndarray) -> np.ndarray:
     return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
 
 
-def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
+def build_bspline_data(seg_ctrl: np.ndarray, free_ends: bool = False) -> BSplineData:
     """Pack validated per-segment control points (from
     :func:`lathe_shape.profiles.bspline.bspline_segments`, oriented clockwise) into
     opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
-    threaded BVH and the bounding cylinder. Call once per shape."""
+    threaded BVH and the bounding cylinder. Call once per shape.
+    ``free_ends``: see :func:`build_cubic_data`."""
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
     # The curve lies in the control points' hull: their bounds size the frame
-    return build_cubic_data(power_coefficients(seg_ctrl), seg_ctrl.reshape(-1, 2))
+    return build_cubic_data(power_coefficients(seg_ctrl), seg_ctrl.reshape(-1, 2),
+                            free_ends=free_ends)
 
 
 def _curve_hull(coef: np.ndarray, r_squared: bool) -> np.ndarray:
@@ -250,7 +252,7 @@ def _curve_hull(coef: np.ndarray, r_squared: bool) -> np.ndarray:
 
 
 def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
-                     r_squared: bool = False) -> BSplineData:
+                     r_squared: bool = False, free_ends: bool = False) -> BSplineData:
     """Pack the power coefficients ``coef`` (n_seg, 2, 4) of validated
     clockwise segment cubics ``R(t)``, ``Z(t)`` (any cubic kind, eq. 18) into
     opaque Dr.Jit buffers, as :func:`build_bspline_data`. ``hull``: points
@@ -259,7 +261,11 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
     ``r_squared``: ``coef[:, 0]`` holds ``R(t)^2`` itself (the ``sor`` kind,
     eq. 20), not ``R(t)``: the kernel then uses that cubic where it would
     square ``R`` (``F`` of eqs. 13-15 drops to degree 3 when ``Z`` is linear),
-    and the segments' ``R`` slots hold ``R^2`` in the unit frame."""
+    and the segments' ``R`` slots hold ``R^2`` in the unit frame.
+
+    ``free_ends``: the curve is an open sheet, whose first and last leaves
+    are not padded beyond its ends (the pad lets neighbouring leaves overlap
+    at a joint; at a free end it would extend the sheet)."""
     coef = np.array(coef, dtype=np.float64)
     pts = _curve_hull(coef, r_squared) if hull is None else np.asarray(hull, dtype=np.float64)
     size, z_c, frame = unit_frame("build_bspline_data()", float(np.abs(pts[:, 0]).max()),
@@ -273,7 +279,9 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
     leaves, boxes = [], []
     for i in range(n_seg):
         for ta, tb in _leaf_pieces(coef[i]):
-            t0, h = ta - _T_PAD, tb - ta + 2 * _T_PAD
+            pad_lo = 0.0 if free_ends and i == 0 and ta == 0.0 else _T_PAD
+            pad_hi = 0.0 if free_ends and i == n_seg - 1 and tb == 1.0 else _T_PAD
+            t0, h = ta - pad_lo, tb - ta + pad_lo + pad_hi
             rp = _reparam(coef[i, 0], t0, h)
             zp = _reparam(coef[i, 1], t0, h)
             rmin, rmax = _cubic_range(rp, 0.0, 1.0)
