@@ -129,9 +129,9 @@ def _rays(name: str, kind: str, n: int):
     segs, _ = _textbook_segments(CURVES[name][0], _points(CURVES[name][1]))
     pick = rng.integers(0, len(segs), n)
     u = rng.uniform(0, 1, n)
-    r = np.array([np.sqrt(max(segs[i][0](segs[i][2] + x * (segs[i][3] - segs[i][2])), 0.0))
-                  for i, x in zip(pick, u, strict=True)])
-    z = np.array([segs[i][1](segs[i][2] + x * (segs[i][3] - segs[i][2])) for i, x in zip(pick, u, strict=True)])
+    at = [(segs[i], segs[i][2] + x * (segs[i][3] - segs[i][2])) for i, x in zip(pick, u, strict=True)]
+    r = np.array([np.sqrt(max(seg[0](t), 0.0)) for seg, t in at])
+    z = np.array([seg[1](t) for seg, t in at])
     phi = rng.uniform(0, 2 * np.pi, n)
     target = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
     d = rng.normal(size=(n, 3))
