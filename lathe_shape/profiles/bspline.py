@@ -54,6 +54,7 @@ __all__ = [
     "orient_clockwise",
     "sample_adaptive",
     "to_polyline",
+    "resample_curve",
 ]
 
 #: Power-basis matrix of the uniform cubic B-spline: ``C = M @ P`` gives the
@@ -517,8 +518,16 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
     end on the axis stays exactly on it (r = 0).
     """
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
-    n_seg = len(seg_ctrl)
-    closed = _segments_closed(seg_ctrl)
+    return resample_curve(lambda T: _eval_global(seg_ctrl, T), len(seg_ctrl),
+                          _segments_closed(seg_ctrl), _scale(seg_ctrl), n_points, method)
+
+
+def resample_curve(eval_global, n_seg: int, closed: bool, scale: float, n_points: int,
+                   method: str = "uniform") -> np.ndarray:
+    """:func:`to_polyline` of any curve of ``n_seg`` segments:
+    ``eval_global(T)`` gives its (len(T), 2) points at global parameters
+    ``T = segment + t``; ``scale`` is its size (ends within ``1e-12 scale``
+    of the axis are put on it)."""
     n_min = 4 if closed else 3
     if n_points < n_min:
         raise BSplineError(f"to_polyline: need at least {n_min} points, got {n_points}")
@@ -530,7 +539,7 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
         # 256 samples per segment, fewer for very many segments (bounded memory).
         per_segment = max(16, min(256, _DENSE_SAMPLES // n_seg))
         dense = np.linspace(0.0, n_seg, per_segment * n_seg + 1)
-        pts = _eval_global(seg_ctrl, dense)
+        pts = eval_global(dense)
         chord = np.diff(pts, axis=0)
         length = np.hypot(chord[:, 0], chord[:, 1])
         ang = np.arctan2(chord[:, 1], chord[:, 0])
@@ -545,11 +554,11 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
     else:
         raise BSplineError(f"to_polyline: unknown method {method!r} (use 'uniform' or 'adaptive')")
     T[0], T[-1] = 0.0, float(n_seg)
-    pts = _eval_global(seg_ctrl, T)
+    pts = eval_global(T)
     if closed:
         pts[-1] = pts[0]
     else:  # ends on the axis stay exactly there (an open sheet's need not be)
-        near_axis = np.abs(pts[[0, -1], 0]) <= 1e-12 * _scale(seg_ctrl)
+        near_axis = np.abs(pts[[0, -1], 0]) <= 1e-12 * scale
         pts[[0, -1], 0] = np.where(near_axis, 0.0, pts[[0, -1], 0])
     return pts
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import BSplineError, adaptive_parameters, cubic_ranges
+from .bspline import BSplineError, adaptive_parameters, cubic_ranges, resample_curve
 from .limits import BSPLINE_SAMPLES_PER_SEGMENT, MAX_COORDINATE, check_point_count
 
 __all__ = ["SorError", "SorProfile", "make_sor_profile", "sor_coefficients"]
@@ -81,6 +81,18 @@ class SorProfile:
         with np.errstate(divide="ignore", invalid="ignore"):
             dr = np.where(dr2 == 0.0, 0.0, dr2 / (2.0 * r))
         return np.nan_to_num(dr, posinf=1e300, neginf=-1e300), dz
+
+    def to_polyline(self, n_points: int, method: str = "uniform") -> np.ndarray:
+        """(n_points, 2) points of the curve, as
+        :func:`lathe_shape.profiles.bspline.to_polyline`."""
+        r_max, z_min, z_max = self.bounds()
+
+        def eval_global(T):
+            i = np.minimum(np.floor(T).astype(np.int64), self.segment_count - 1)
+            return np.stack(self.evaluate(i, T - i), axis=1)
+
+        return resample_curve(eval_global, self.segment_count, False,
+                              float(np.hypot(r_max, z_max - z_min)) or 1.0, n_points, method)
 
     def sample_parameters(self, max_angle_deg: float) -> list[tuple[int, float]]:
         """Adaptive ``(segment, t)`` samples for the reference mesh."""
