@@ -78,7 +78,8 @@ def test_axis_conversion():
 
 @pytest.mark.parametrize("text, message", [
     ("lathe { linear_spline <0, 0>, <1, 1> }", "scene.pov:1: expected a literal number for the point count"),
-    ("lathe {\n 4, <0, 0>, <1, 0>, <0, 1> }", "scene.pov:2: the lathe announces 4 points but point 4 is missing"),
+    ("lathe {\n 4, <0, 0>, <1, 0>, <0, 1> }",
+     "scene.pov:2: the lathe announces 4 points but point 4 is missing"),
     ("lathe { 3, <0, 0>, <R, 0>, <0, 1> }", "expected a literal number for point 2 of the lathe"),
     ("sor { 4, <0, 0>, <1*2, 0>, <1, 1>, <0, 2> }", "expressions are not evaluated"),
     ("lathe { cubic_splin 4, <0, 0>, <1, 0>, <1, 1>, <0, 1> }", "unknown lathe spline type 'cubic_splin'"),
