@@ -16,8 +16,8 @@ import os
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-
 from conftest import SCENES
+
 from lathe_shape.cli import profile as cli
 
 SAMPLES = SCENES / "pov_samples"
