@@ -39,7 +39,7 @@ from .bspline import BSplineError, BSplineProfile
 from .limits import BSPLINE_SAMPLES_PER_SEGMENT, MAX_COORDINATE, check_point_count
 
 __all__ = ["CUBIC_KINDS", "kind_coefficients", "make_cubic_profile", "to_bspline_controls",
-           "curve_form"]
+           "curve_form", "bezier_points", "catmull_rom_through", "quadratic_through"]
 
 #: Power-basis matrices (rows: 1, t, t^2, t^3) of each kind's window of
 #: control points (columns), and how far the window moves per segment.
@@ -100,6 +100,32 @@ def to_bspline_controls(coef: np.ndarray) -> np.ndarray:
     """Per-segment uniform B-spline control points ``(n_seg, 4, 2)`` of the
     cubics with power coefficients ``coef`` (n_seg, 2, 4) (eq. 18)."""
     return np.einsum("kj,icj->ikc", _TO_BSPLINE, np.asarray(coef, dtype=np.float64))
+
+
+def bezier_points(coef: np.ndarray) -> np.ndarray:
+    """The ``bezier`` control points (4 per segment) of the cubics with
+    power coefficients ``coef`` (n_seg, 2, 4): the same curve, each
+    segment's first point set to the previous one's last (bit-equal joints,
+    as the ``bezier`` kind requires)."""
+    c = np.transpose(np.asarray(coef, dtype=np.float64), (0, 2, 1))  # (n, 4 powers, 2)
+    b = np.stack([c[:, 0], c[:, 0] + c[:, 1] / 3, c[:, 0] + (2 * c[:, 1] + c[:, 2]) / 3,
+                  c.sum(axis=1)], axis=1)
+    b[1:, 0] = b[:-1, 3]
+    return b.reshape(-1, 2)
+
+
+def catmull_rom_through(points: np.ndarray) -> np.ndarray:
+    """``catmull_rom`` control points of the curve through ``points``: the
+    points plus end tangent controls mirrored through the ends."""
+    p = np.asarray(points, dtype=np.float64)
+    return np.concatenate([2 * p[:1] - p[1:2], p, 2 * p[-1:] - p[-2:-1]])
+
+
+def quadratic_through(points: np.ndarray) -> np.ndarray:
+    """``quadratic`` control points of the curve through ``points``: the
+    points plus a start tangent control mirrored through the first."""
+    p = np.asarray(points, dtype=np.float64)
+    return np.concatenate([2 * p[:1] - p[1:2], p])
 
 
 def curve_form(start: np.ndarray, end: np.ndarray, scale: float) -> tuple[bool, bool]:
