@@ -292,3 +292,56 @@ def test_dielectric_on_open_sheet_warns():
 def test_profile_error_class():
     with pytest.raises(ProfileError):
         make_cubic_profile("bezier", _points("0 0, 1 0, 1.2 0.5, 1.3 1.5"), "cup")
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_reference_mesh_lies_on_the_curve_with_the_exact_normals_and_uv(name):
+    """Mesh vertices lie on the curve, and their normals and texture
+    coordinates are the exact kernel's (geometry at the same (seg, u))."""
+    shape = _lathe(name)
+    if CURVES[name][0] == "polyline":
+        pytest.skip("polyline meshes: tests/test_tessellate.py")
+    mesh = shape.surface.tessellate(16)
+    n_seg = shape.profile.segment_count
+    v = mesh.texcoords[:, 1] * n_seg
+    seg = np.minimum(np.floor(v), n_seg - 1)
+    geo = shape.surface.geometry(mi.Point3f(mesh.positions.T.astype(np.float32)),
+                                 mi.UInt32(seg.astype(np.uint32)), mi.Float((v - seg).astype(np.float32)))
+    n = np.stack([c.numpy() for c in geo.n], axis=1)
+    pole = np.hypot(mesh.positions[:, 0], mesh.positions[:, 1]) < 1e-9
+    cos = np.einsum("ij,ij->i", n[~pole], mesh.normals[~pole])
+    assert np.percentile(cos, 1) > 0.9999 and cos.min() > 0.99
+    u_exact = geo.uv.numpy()[0][~pole]
+    u_mesh = mesh.texcoords[~pole, 0]
+    assert np.allclose(np.mod(u_exact - u_mesh + 0.5, 1.0) - 0.5, 0.0, atol=1e-5)
+    # On the curve: the exact kernel hits each vertex from just outside it.
+    p = mesh.positions[~pole][::7]
+    nn = mesh.normals[~pole][::7]
+    t, _ = _exact(shape, p + 1e-3 * nn, -nn)
+    assert np.percentile(np.abs(t - 1e-3), 95) < 1e-4
+
+
+@pytest.mark.parametrize("name, bsdf", [("bezier_cup", {"type": "thindielectric"}),
+                                        ("sor_cup", {"type": "twosided", "bsdf": {"type": "conductor"}})])
+def test_open_sheet_renders_like_its_reference_mesh(name, bsdf):
+    kind, text, _ = CURVES[name]
+    res = 40
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, -7, 4], target=[0, 0, 0.8],
+                                                              up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
+        "env": {"type": "constant", "radiance": {"type": "rgb", "value": [0.4, 0.4, 0.4]}},
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(20),
+                  "bsdf": {"type": "diffuse", "reflectance": {
+                      "type": "checkerboard", "to_uv": mi.ScalarTransform4f().scale([10, 10, 1])}}},
+        "cup": {"type": "lathe", "kind": kind, "profile": text, "open": True, "mesh_segments": 1024,
+                "to_world": mi.ScalarTransform4f().translate([0, 0, 0.5]), "bsdf": bsdf},
+    })
+    exact = mi.render(scene, spp=32, seed=1, integrator=mi.load_dict({"type": "lathe_path", "max_depth": 8}))
+    mesh = mi.render(scene, spp=32, seed=1, integrator=mi.load_dict({"type": "path", "max_depth": 8}))
+    exact, mesh = exact.numpy(), mesh.numpy()
+    scale = exact.mean()
+    assert np.abs(mesh - exact).mean() / scale < 0.06
+    assert abs(mesh.mean() - exact.mean()) / scale < 0.01
