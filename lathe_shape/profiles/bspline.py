@@ -43,6 +43,7 @@ __all__ = [
     "make_bspline_profile",
     "bspline_segments",
     "validate_curve",
+    "control_points",
     "cubic_ranges",
     "adaptive_parameters",
     "is_closed",
@@ -112,27 +113,34 @@ def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
     (r < 0 anywhere, r = 0 other than at the open ends), has a cusp (zero
     tangent), encloses no area, or intersects itself.
     """
+    p = control_points(points, source, "B-spline")
+    seg, closed = _segment_controls(p, source)
+    validate_curve(seg, closed, source)
+    return seg
+
+
+def control_points(points: np.ndarray, source: str, what: str) -> np.ndarray:
+    """The control points of a ``what`` curve (``B-spline``, ``bezier``,
+    ...) as a finite (m, 2) float64 array, each coordinate below
+    :data:`.limits.MAX_COORDINATE`; raises :class:`BSplineError`."""
     try:
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as e:
-        raise BSplineError(f"{source}: B-spline control points are not numbers ({e})") from None
+        raise BSplineError(f"{source}: {what} control points are not numbers ({e})") from None
     if p.ndim != 2 or p.shape[1] != 2:
-        raise BSplineError(f"{source}: B-spline control points must be (r, z) pairs, "
+        raise BSplineError(f"{source}: {what} control points must be (r, z) pairs, "
                            f"got an array of shape {p.shape}")
     check_point_count(len(p), source, "control points", _CHECK_SAMPLES, BSplineError)
     if not np.all(np.isfinite(p)):
         bad = int(np.argwhere(~np.all(np.isfinite(p), axis=1))[0, 0])
-        raise BSplineError(f"{source}: B-spline control point {bad} is not finite: "
+        raise BSplineError(f"{source}: {what} control point {bad} is not finite: "
                            f"{p[bad].tolist()}")
     if np.any(np.abs(p) >= MAX_COORDINATE):
         bad = int(np.argwhere(np.any(np.abs(p) >= MAX_COORDINATE, axis=1))[0, 0])
-        raise BSplineError(f"{source}: B-spline control point {bad} is too large: {p[bad].tolist()} "
+        raise BSplineError(f"{source}: {what} control point {bad} is too large: {p[bad].tolist()} "
                            f"(|r| and |z| must be below {MAX_COORDINATE:g}: their squares must fit "
                            f"in float32)")
-
-    seg, closed = _segment_controls(p, source)
-    validate_curve(seg, closed, source)
-    return seg
+    return p
 
 
 def _segment_controls(p: np.ndarray, source: str) -> tuple[np.ndarray, bool]:

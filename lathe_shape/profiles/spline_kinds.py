@@ -36,7 +36,7 @@ import numpy as np
 
 from . import bspline as bs
 from .bspline import BSplineError, BSplineProfile
-from .limits import BSPLINE_SAMPLES_PER_SEGMENT, MAX_COORDINATE, check_point_count
+from .limits import BSPLINE_SAMPLES_PER_SEGMENT
 
 __all__ = ["CUBIC_KINDS", "kind_coefficients", "make_cubic_profile", "to_bspline_controls",
            "curve_form", "bezier_points", "catmull_rom_through", "quadratic_through"]
@@ -75,7 +75,7 @@ def kind_coefficients(kind: str, points: np.ndarray, source: str = "profile") ->
     count or, for ``bezier``, segments that do not join."""
     matrix, step = _MATRICES[kind]
     pov_name, least = CUBIC_KINDS[kind]
-    p = _checked_points(points, source, kind)
+    p = bs.control_points(points, source, kind)
     width = matrix.shape[1]
     if len(p) < least:
         raise BSplineError(f"{source}: a {kind} profile ({pov_name}) needs at least {least} "
@@ -175,21 +175,3 @@ def _reversed_for_outward(seg: np.ndarray, open_sheet: bool) -> bool:
     r, _ = bs._grid_values(seg, t)
     _, dz = bs._grid_values(seg, t, derivative=True)
     return float(np.sum(r * dz)) > 1e-12 * bs._scale(seg) ** 2 * BSPLINE_SAMPLES_PER_SEGMENT
-
-
-def _checked_points(points: np.ndarray, source: str, kind: str) -> np.ndarray:
-    """Finite (m, 2) control points below :data:`.limits.MAX_COORDINATE`."""
-    try:
-        p = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise BSplineError(f"{source}: {kind} control points are not numbers ({e})") from None
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise BSplineError(f"{source}: {kind} control points must be (r, z) pairs, "
-                           f"got an array of shape {p.shape}")
-    check_point_count(len(p), source, "control points", BSPLINE_SAMPLES_PER_SEGMENT, BSplineError)
-    bad = ~np.all(np.isfinite(p), axis=1) | np.any(np.abs(p) >= MAX_COORDINATE, axis=1)
-    if np.any(bad):
-        k = int(np.argmax(bad))
-        raise BSplineError(f"{source}: {kind} control point {k} is not finite or too large: "
-                           f"{p[k].tolist()} (|r| and |z| must be below {MAX_COORDINATE:g})")
-    return p
