@@ -35,7 +35,8 @@ MAX_POLYLINE_POINTS = 1_000_000
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="lathe-profile",
-        description="Validate a lathe profile, or convert a B-spline profile to a polyline.",
+        description="Validate a lathe profile, convert a curve profile to a polyline, or import "
+                    "the lathe and sor blocks of a POV-Ray file.",
     )
     parser.add_argument("input", nargs="?",
                         help="profile file (CSV r,z[,sharp], or a .json/.toml arc spec)")
