@@ -345,3 +345,29 @@ def test_open_sheet_renders_like_its_reference_mesh(name, bsdf):
     scale = exact.mean()
     assert np.abs(mesh - exact).mean() / scale < 0.06
     assert abs(mesh.mean() - exact.mean()) / scale < 0.01
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_meshes_are_watertight_or_open_at_the_free_ends_only(name):
+    from test_tessellate import assert_watertight, welded_edges
+
+    shape = _lathe(name)
+    mesh = shape.surface.tessellate(24)
+    if not CURVES[name][2]:
+        assert_watertight(mesh)
+        return
+    faces, counts, directed, n_edges = welded_edges(mesh)
+    assert counts.max() == 2 and len(directed) == n_edges  # consistently oriented
+    # Edges of a single face lie on the free ends (rings with r > 0 there).
+    welded = np.unique(mesh.positions, axis=0)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    boundary = welded[np.unique(unique[count == 1])]
+    rz = np.stack([np.hypot(boundary[:, 0], boundary[:, 1]), boundary[:, 2]], axis=1)
+    r, z = shape.surface.profile_samples[0].T if hasattr(shape.surface, "profile_samples") \
+        else shape.profile.points.T
+    ends = np.stack([r[[0, -1]], z[[0, -1]]], axis=1)
+    free = ends[ends[:, 0] > 0]
+    assert len(boundary) >= 24 and len(free) >= 1
+    near = np.min(np.linalg.norm(rz[:, None, :] - free[None, :, :], axis=2), axis=1)
+    assert near.max() < 1e-6
