@@ -127,7 +127,9 @@ _STRIDE = 8
 
 #: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
 #: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
-#: the leaf's parameter u), then (t0, h, segment, 0).
+#: the leaf's parameter u), then (t0, h, segment, r_squared): the last is 1
+#: where the R slots hold R^2 (the sor kind; the kernel reads the Python flag
+#: ``BSplineData.r_squared``, this copy serves data that mixes kinds).
 _LEAF_STRIDE = 20
 
 #: Longest leaf, in segment parameter t (before padding).
@@ -288,7 +290,8 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
             if r_squared:
                 rmin, rmax = math.sqrt(max(rmin, 0.0)), math.sqrt(max(rmax, 0.0))
             zmin, zmax = _cubic_range(zp, 0.0, 1.0)
-            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp, [t0, h, i, 0.0]]))
+            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp,
+                                          [t0, h, i, float(r_squared)]]))
             boxes.append([max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad])
     boxes = np.array(boxes)
     # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
