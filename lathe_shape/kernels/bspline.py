@@ -32,6 +32,14 @@ rays, every root must also pass ``R(t) >= r0``. The nearest hit is finally
 polished by two guarded Newton steps on the unsquared (s, t) system
 ``z(s) = Z(t)``, ``|xy(s)|^2 = R(t)^2``.
 
+Squared radius given directly. A segment may give ``R(t)^2`` itself as a
+cubic ``P(t)`` instead of ``R(t)`` (the ``sor`` kind, docs/method.md eqs.
+19-20; :func:`build_cubic_data` with ``r_squared``): ``F`` then takes ``P``
+where it squares ``R`` (degree 3 when ``Z`` is linear), and so do the hull,
+the ``R >= r0`` test, the polish and the normal. Every other cubic kind
+(Bezier, Catmull-Rom, quadratic; eqs. 17-18) arrives as power coefficients
+of ``R`` and ``Z`` and is handled exactly like a B-spline.
+
 Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
 then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
 covers ``t = t0 + h u``, ``u`` in [0, 1], padded by ``_T_PAD`` in ``t`` on
