@@ -114,7 +114,11 @@ def test_round_trip_gives_the_same_exact_hits(pov_file, tmp_path, capsys):
     by_hand = {
         "Vase": ("bezier", "0 0, 1.5 0, 1.6 0.3, 1.6 1.2, 1.6 1.2, 1.6 2.2, 0.4 2.4, 0 2.4", False,
                  mi.ScalarTransform4f().translate([1, 3, 0]).scale(2)),
+        "Goblet": ("catmull_rom", "0 -0.3, 0 0, 1.1 0.05, 0.25 0.5, 1.2 1.9, 0 1.8, 0 1.5", False,
+                   # POV-Ray's rotate about +x is one about Mitsuba's +x, the other way round.
+                   mi.ScalarTransform4f().rotate([1, 0, 0], -90)),
         "scene_lathe3": ("quadratic", "0 -1, 0 0, 1 0.5, 1.2 1.5", True, mi.ScalarTransform4f()),
+        "scene_lathe4": ("polyline", "0 0, 1 0, 0 1", False, mi.ScalarTransform4f()),
         "scene_sor1": ("sor", "0 -0.5, 1.0 0, 1.2 0.5, 0.6 1.5, 0.4 2.5, 0.5 3, 0.6 3.5", True,
                        # POV-Ray's rotate about +y is one about Mitsuba's +z, the other way round.
                        mi.ScalarTransform4f().rotate([0, 0, 1], -30)),
