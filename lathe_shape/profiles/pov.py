@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .bspline import evaluate
 from .errors import ProfileError
 from .spline_kinds import curve_form, kind_coefficients, to_bspline_controls
 
@@ -274,8 +275,6 @@ def is_open(kind: str, points: np.ndarray, where: str) -> bool:
         start, end = p[0], p[-1]
     else:
         seg = to_bspline_controls(kind_coefficients(kind, p, where))
-        from .bspline import evaluate
-
         start = np.array(evaluate(seg, 0, 0.0), dtype=np.float64)
         end = np.array(evaluate(seg, len(seg) - 1, 1.0), dtype=np.float64)
     scale = float(np.ptp(p, axis=0).max()) or 1.0

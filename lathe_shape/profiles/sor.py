@@ -72,33 +72,40 @@ class SorProfile:
         return np.sqrt(np.maximum(r2, 0.0)), _polyval(c[..., 1, :], t)
 
     def derivative(self, index, t) -> tuple[np.ndarray, np.ndarray]:
-        """Tangent ``(dr/du, dz/du)``; ``dr = (r^2)' / (2 r)``, 0 where both
-        vanish (the centre of a disc)."""
-        c = self.coefficients[np.asarray(index)]
+        """Tangent ``(dr/du, dz/du)``, ``dr = (r^2)' / (2 r)``; on the axis
+        (where that is 0 / 0 or infinite) a one-sided difference quotient
+        over ``1e-6`` in ``u`` stands for it, giving the limit direction."""
+        index = np.asarray(index)
+        t = np.asarray(t, dtype=np.float64)
+        c = self.coefficients[index]
         r = self.evaluate(index, t)[0]
         dr2 = _polyval(c[..., 0, 1:] * [1.0, 2.0, 3.0], t)
         dz = _polyval(c[..., 1, 1:] * [1.0, 2.0, 3.0], t)
+        on_axis = r <= 1e-6 * self.scale()
         with np.errstate(divide="ignore", invalid="ignore"):
-            dr = np.where(dr2 == 0.0, 0.0, dr2 / (2.0 * r))
-        return np.nan_to_num(dr, posinf=1e300, neginf=-1e300), dz
+            dr = np.where(on_axis, 0.0, dr2 / (2.0 * r))
+        if np.any(on_axis):
+            step = np.where(t < 0.5, 1e-6, -1e-6)
+            r_near = self.evaluate(index, t + step)[0]
+            dr = np.where(on_axis, (r_near - r) / step, dr)
+        return dr, dz
+
+    def scale(self) -> float:
+        """The curve's size (the diagonal of its (r, z) box, 1 if none)."""
+        r_max, z_min, z_max = self.bounds()
+        return float(np.hypot(r_max, z_max - z_min)) or 1.0
 
     def to_polyline(self, n_points: int, method: str = "uniform") -> np.ndarray:
         """(n_points, 2) points of the curve, as
         :func:`lathe_shape.profiles.bspline.to_polyline`."""
-        r_max, z_min, z_max = self.bounds()
-
         def eval_global(T):
             i = np.minimum(np.floor(T).astype(np.int64), self.segment_count - 1)
             return np.stack(self.evaluate(i, T - i), axis=1)
 
-        return resample_curve(eval_global, self.segment_count, False,
-                              float(np.hypot(r_max, z_max - z_min)) or 1.0, n_points, method)
+        return resample_curve(eval_global, self.segment_count, False, self.scale(), n_points, method)
 
     def sample_parameters(self, max_angle_deg: float) -> list[tuple[int, float]]:
         """Adaptive ``(segment, t)`` samples for the reference mesh."""
-        r_max, z_min, z_max = self.bounds()
-        scale = float(np.hypot(r_max, z_max - z_min)) or 1.0
-
         def point(i, t):
             return np.array([float(v) for v in self.evaluate(i, t)])
 
@@ -110,7 +117,7 @@ class SorProfile:
                 n = np.linalg.norm(v)
             return v / n
 
-        return adaptive_parameters(self.segment_count, point, tangent, max_angle_deg, 1e-4 * scale)
+        return adaptive_parameters(self.segment_count, point, tangent, max_angle_deg, 1e-4 * self.scale())
 
 
 def _polyval(c: np.ndarray, t) -> np.ndarray:
