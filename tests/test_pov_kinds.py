@@ -32,6 +32,7 @@ CURVES = {
     "sor_bottle": ("sor", "0 -0.5, 1.0 0, 1.2 0.5, 0.6 1.5, 0.4 2.5, 0.5 3, 0.6 3.5", False),
     "bezier_cup": ("bezier", "0 0, 1 0, 1.2 0.5, 1.3 1.5", True),
     "catmull_rom_cup": ("catmull_rom", "0 -0.2, 0 0, 0.9 0.1, 1.1 0.8, 1.3 1.6, 1.6 2.0", True),
+    "sor_spindle": ("sor", "1 -1, 0 0, 1 0.5, 1 2, 0 3, 0.5 3.5", False),
     "sor_cup": ("sor", "0 -0.5, 0.8 0, 1.0 0.5, 0.7 1.5, 0.9 2.2, 1.2 2.5", True),
     "polyline_cup": ("polyline", "0 0, 1 0, 1.2 1.5, 1.4 1.9", True),
 }
