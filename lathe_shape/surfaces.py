@@ -11,7 +11,14 @@ needs from one profile kind, without any plugin code (so a native
 
 :class:`PolylineSurface` is the paper's Method 1 (cone frustums, annuli,
 interpolated normals); :class:`BSplineSurface` its Method 2 (uniform cubic
-B-spline, degree-6 roots, exact normals).
+B-spline, degree-6 roots, exact normals). POV-Ray's other curve kinds share
+Method 2: ``bezier``, ``catmull_rom`` and ``quadratic`` profiles convert to
+per-segment B-spline cubics (:mod:`.profiles.spline_kinds`), and ``sor``
+(:class:`SorSurface`) gives ``r^2`` as a cubic directly
+(:mod:`.profiles.sor`).
+
+Every kind but ``sor`` may be a single open sheet (``open_sheet``): a curve
+whose ends are not joined, with no inside.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from .kernels.bspline import (
     BSplineData,
     bspline_geometry,
     build_bspline_data,
+    build_cubic_data,
     intersect_bspline,
     occluded_bspline,
 )
@@ -40,9 +48,12 @@ from .kernels.polyline import (
 from .profiles import bspline as bs
 from .profiles.bspline import BSplineProfile, make_bspline_profile
 from .profiles.polyline import Profile, ProfileError, make_profile
+from .profiles.sor import SorProfile, make_sor_profile
+from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
-__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SURFACE_KINDS", "make_surface"]
+__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SorSurface", "SURFACE_KINDS",
+           "make_surface"]
 
 
 class Surface(Protocol):
@@ -115,16 +126,27 @@ class PolylineSurface(_KernelSurface):
 
 
 class BSplineSurface(_KernelSurface):
-    """Revolved uniform cubic B-spline profile (paper Method 2)."""
+    """Revolved uniform cubic B-spline profile (paper Method 2), or a
+    profile of another cubic kind converted to it (``profile.kind``)."""
 
-    kind = "bspline"
     smooth = True
     _intersect = staticmethod(intersect_bspline)
     _occluded = staticmethod(occluded_bspline)
 
-    def __init__(self, profile: BSplineProfile, max_angle_deg: float = 1.0) -> None:
+    def __init__(self, profile: BSplineProfile | SorProfile, max_angle_deg: float = 1.0) -> None:
         self.profile = profile
         self.max_angle_deg = max_angle_deg
+        #: The kind's name: ``bspline``, ``bezier``, ``catmull_rom``, ``quadratic``, ``sor``.
+        self.kind = profile.kind
+
+    def _samples(self) -> list[tuple[int, float]]:
+        return bs.sample_adaptive(self.profile.segment_controls, max_angle_deg=self.max_angle_deg)
+
+    def _evaluate(self, index: np.ndarray, t: np.ndarray):
+        return bs.evaluate(self.profile.segment_controls, index, t)
+
+    def _derivative(self, index: np.ndarray, t: np.ndarray):
+        return bs.derivative(self.profile.segment_controls, index, t)
 
     @functools.cached_property
     def profile_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -132,12 +154,11 @@ class BSplineSurface(_KernelSurface):
         v = (segment + t) / segments (the exact kernel's texture v). A closed
         curve's last sample repeats its first (v = 1 there). Computed once:
         the reference mesh's rings, and its memory estimate."""
-        seg = self.profile.segment_controls
-        samples = bs.sample_adaptive(seg, max_angle_deg=self.max_angle_deg)
+        samples = self._samples()
         index = np.array([i for i, _ in samples])
         t = np.array([t for _, t in samples])
-        r, z = bs.evaluate(seg, index, t)
-        dr, dz = bs.derivative(seg, index, t)
+        r, z = self._evaluate(index, t)
+        dr, dz = self._derivative(index, t)
         points = np.stack([r, z], axis=1)
         tangent = np.stack([dr, dz], axis=1)
         v = (index + t) / self.profile.segment_count
@@ -164,29 +185,58 @@ class BSplineSurface(_KernelSurface):
         return revolve(points, normals, v, bands, steps)
 
     def _build_data(self) -> BSplineData:
-        return build_bspline_data(self.profile.segment_controls)
+        return build_bspline_data(self.profile.segment_controls, free_ends=self.profile.open_sheet)
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return bspline_geometry(self.data, p, seg, u)
 
 
-def _polyline_surface(points, sharp, labels, source, crease_angle, smooth):
-    profile = make_profile(points, sharp, labels, source=source, crease_angle=crease_angle)
+class SorSurface(BSplineSurface):
+    """Revolved POV-Ray ``sor``: ``r^2`` a cubic in the height (eqs. 19-20),
+    solved by the Method 2 kernel with ``r_squared``."""
+
+    def _samples(self) -> list[tuple[int, float]]:
+        return self.profile.sample_parameters(self.max_angle_deg)
+
+    def _evaluate(self, index: np.ndarray, t: np.ndarray):
+        return self.profile.evaluate(index, t)
+
+    def _derivative(self, index: np.ndarray, t: np.ndarray):
+        return self.profile.derivative(index, t)
+
+    def _build_data(self) -> BSplineData:
+        return build_cubic_data(self.profile.coefficients, r_squared=True,
+                                free_ends=self.profile.open_sheet)
+
+
+def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
+    profile = make_profile(points, sharp, labels, source=source, crease_angle=crease_angle,
+                           open_sheet=open_sheet)
     return PolylineSurface(profile, smooth)
 
 
-def _bspline_surface(points, sharp, labels, source, crease_angle, smooth):
+def _smooth_curve_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
+    """B-spline, Bezier, Catmull-Rom, quadratic and sor profiles."""
     if np.any(sharp):
         k = int(np.argmax(sharp))
         raise ProfileError(
-            f"{labels[k]}: sharp flags are not supported for kind 'bspline' (the curve is smooth)"
+            f"{labels[k]}: sharp flags are not supported for kind '{kind}' (the curve is smooth)"
         )
-    return BSplineSurface(make_bspline_profile(points, source))
+    if kind == "sor":
+        return SorSurface(make_sor_profile(points, source, open_sheet))
+    if kind == "bspline":
+        if open_sheet:
+            raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
+                               f"'catmull_rom' for an open sheet")
+        return BSplineSurface(make_bspline_profile(points, source))
+    return BSplineSurface(make_cubic_profile(kind, points, source, open_sheet))
 
 
 #: The registry of profile kinds: the ``kind`` parameter's values and the
 #: factory that validates the points and builds the surface.
-SURFACE_KINDS = {"polyline": _polyline_surface, "bspline": _bspline_surface}
+SURFACE_KINDS = {"polyline": _polyline_surface, "bspline": _smooth_curve_surface,
+                 **{kind: _smooth_curve_surface for kind in CUBIC_KINDS},
+                 "sor": _smooth_curve_surface}
 
 
 def make_surface(
@@ -197,13 +247,16 @@ def make_surface(
     source: str,
     crease_angle: float = 30.0,
     smooth: bool = True,
+    open_sheet: bool = False,
 ) -> PolylineSurface | BSplineSurface:
     """Validate the points (once) as a profile of ``kind`` and build its
     surface. ``labels[k]`` names point ``k`` and ``source`` the file or
     parameter in error messages; ``crease_angle`` and ``smooth`` concern
-    polylines only (B-splines have exact normals)."""
+    polylines only (the curve kinds have exact normals); ``open_sheet``
+    makes the profile a single open sheet (``sor``: POV-Ray's ``open``, no
+    end discs)."""
     if kind not in SURFACE_KINDS:
         raise ProfileError(
             f"{source}: unknown profile kind '{kind}' (expected one of: {', '.join(SURFACE_KINDS)})"
         )
-    return SURFACE_KINDS[kind](points, sharp, labels, source, crease_angle, smooth)
+    return SURFACE_KINDS[kind](kind, points, sharp, labels, source, crease_angle, smooth, open_sheet)

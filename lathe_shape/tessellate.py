@@ -1,4 +1,4 @@
-"""Reference tessellation of a lathe: profile -> closed triangle mesh (numpy).
+"""Reference tessellation of a lathe: profile -> triangle mesh (numpy).
 
 The profile (a chain of (r, z) points with per-segment end normals) is swept
 through ``azimuth_steps`` equal angular steps about the local +z axis:
@@ -17,8 +17,10 @@ through ``azimuth_steps`` equal angular steps about the local +z axis:
   triangles, wound counter-clockwise seen from outside (outward face normal
   ``T_profile x T_azimuth``).
 
-The result is watertight once coincident positions are welded: every edge is
-shared by exactly two triangles (``tests/test_tessellate.py`` checks this).
+For the profile of a solid the result is watertight once coincident
+positions are welded: every edge is shared by exactly two triangles
+(``tests/test_tessellate.py`` checks this). An open sheet's profile gives an
+open mesh, whose free ends are rings of boundary edges.
 """
 
 from __future__ import annotations

@@ -32,6 +32,14 @@ rays, every root must also pass ``R(t) >= r0``. The nearest hit is finally
 polished by two guarded Newton steps on the unsquared (s, t) system
 ``z(s) = Z(t)``, ``|xy(s)|^2 = R(t)^2``.
 
+Squared radius given directly. A segment may give ``R(t)^2`` itself as a
+cubic ``P(t)`` instead of ``R(t)`` (the ``sor`` kind, docs/method.md eqs.
+19-20; :func:`build_cubic_data` with ``r_squared``): ``F`` then takes ``P``
+where it squares ``R`` (degree 3 when ``Z`` is linear), and so do the hull,
+the ``R >= r0`` test, the polish and the normal. Every other cubic kind
+(Bezier, Catmull-Rom, quadratic; eqs. 17-18) arrives as power coefficients
+of ``R`` and ``Z`` and is handled exactly like a B-spline.
+
 Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
 then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
 covers ``t = t0 + h u``, ``u`` in [0, 1], padded by ``_T_PAD`` in ``t`` on
@@ -115,6 +123,7 @@ __all__ = [
     "BSplineHit",
     "BSplineGeometry",
     "build_bspline_data",
+    "build_cubic_data",
     "intersect_bspline",
     "occluded_bspline",
     "bspline_geometry",
@@ -126,7 +135,9 @@ _STRIDE = 8
 
 #: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
 #: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
-#: the leaf's parameter u), then (t0, h, segment, 0).
+#: the leaf's parameter u), then (t0, h, segment, r_squared): the last is 1
+#: where the R slots hold R^2 (the sor kind; the kernel reads the Python flag
+#: ``BSplineData.r_squared``, this copy serves data that mixes kinds).
 _LEAF_STRIDE = 20
 
 #: Longest leaf, in segment parameter t (before padding).
@@ -169,6 +180,8 @@ class BSplineData(LatheData):
         n_nodes: opaque ``mi.UInt32``: nodes per copy.
         n_seg: opaque ``mi.UInt32`` (one element): number of segments.
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
+        r_squared: Python bool, True when the ``R`` slots hold ``R^2`` (the
+            ``sor`` kind, :func:`build_cubic_data`); chosen when tracing.
         bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
             cylinder of the whole curve (the union of the leaf boxes).
         scale, inv_scale, z_shift: the unit frame (kernels/common.py), in
@@ -226,30 +239,67 @@ def _bezier(p: np.ndarray) -> np.ndarray:
     return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
 
 
-def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
+def build_bspline_data(seg_ctrl: np.ndarray, free_ends: bool = False) -> BSplineData:
     """Pack validated per-segment control points (from
     :func:`lathe_shape.profiles.bspline.bspline_segments`, oriented clockwise) into
     opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
-    threaded BVH and the bounding cylinder. Call once per shape."""
+    threaded BVH and the bounding cylinder. Call once per shape.
+    ``free_ends``: see :func:`build_cubic_data`."""
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
-    pts = seg_ctrl.reshape(-1, 2)
     # The curve lies in the control points' hull: their bounds size the frame
+    return build_cubic_data(power_coefficients(seg_ctrl), seg_ctrl.reshape(-1, 2),
+                            free_ends=free_ends)
+
+
+def _curve_hull(coef: np.ndarray, r_squared: bool) -> np.ndarray:
+    """Two corners ``(rmin, zmin), (rmax, zmax)`` of the exact bounding box
+    of the curve (``coef`` in the user's units)."""
+    r = np.array([_cubic_range(c, 0.0, 1.0) for c in coef[:, 0]])
+    z = np.array([_cubic_range(c, 0.0, 1.0) for c in coef[:, 1]])
+    if r_squared:
+        r = np.sqrt(np.maximum(r, 0.0))
+    return np.array([[r[:, 0].min(), z[:, 0].min()], [r[:, 1].max(), z[:, 1].max()]])
+
+
+def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
+                     r_squared: bool = False, free_ends: bool = False) -> BSplineData:
+    """Pack the power coefficients ``coef`` (n_seg, 2, 4) of validated
+    clockwise segment cubics ``R(t)``, ``Z(t)`` (any cubic kind, eq. 18) into
+    opaque Dr.Jit buffers, as :func:`build_bspline_data`. ``hull``: points
+    whose bounding box holds the curve (default: its exact box).
+
+    ``r_squared``: ``coef[:, 0]`` holds ``R(t)^2`` itself (the ``sor`` kind,
+    eq. 20), not ``R(t)``: the kernel then uses that cubic where it would
+    square ``R`` (``F`` of eqs. 13-15 drops to degree 3 when ``Z`` is linear),
+    and the segments' ``R`` slots hold ``R^2`` in the unit frame.
+
+    ``free_ends``: the curve is an open sheet, whose first and last leaves
+    are not padded beyond its ends (the pad lets neighbouring leaves overlap
+    at a joint; at a free end it would extend the sheet)."""
+    coef = np.array(coef, dtype=np.float64)
+    pts = _curve_hull(coef, r_squared) if hull is None else np.asarray(hull, dtype=np.float64)
     size, z_c, frame = unit_frame("build_bspline_data()", float(np.abs(pts[:, 0]).max()),
                                   float(pts[:, 1].min()), float(pts[:, 1].max()))
-    seg_ctrl = (seg_ctrl - [0.0, z_c]) / size
-    coef = power_coefficients(seg_ctrl)  # (n_seg, 2, 4)
+    coef[:, 1, 0] -= z_c
+    coef[:, 1] /= size
+    coef[:, 0] /= size * size if r_squared else size
     n_seg = len(coef)
     # Padding (unit frame): float32 rounding of the data and of the ray.
-    pad = 1e-5 * float(np.linalg.norm(np.ptp(seg_ctrl.reshape(-1, 2), axis=0)))
+    pad = 1e-5 * float(np.linalg.norm(np.ptp(pts, axis=0))) / size
     leaves, boxes = [], []
     for i in range(n_seg):
         for ta, tb in _leaf_pieces(coef[i]):
-            t0, h = ta - _T_PAD, tb - ta + 2 * _T_PAD
+            pad_lo = 0.0 if free_ends and i == 0 and ta == 0.0 else _T_PAD
+            pad_hi = 0.0 if free_ends and i == n_seg - 1 and tb == 1.0 else _T_PAD
+            t0, h = ta - pad_lo, tb - ta + pad_lo + pad_hi
             rp = _reparam(coef[i, 0], t0, h)
             zp = _reparam(coef[i, 1], t0, h)
             rmin, rmax = _cubic_range(rp, 0.0, 1.0)
+            if r_squared:
+                rmin, rmax = math.sqrt(max(rmin, 0.0)), math.sqrt(max(rmax, 0.0))
             zmin, zmax = _cubic_range(zp, 0.0, 1.0)
-            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp, [t0, h, i, 0.0]]))
+            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp,
+                                          [t0, h, i, float(r_squared)]]))
             boxes.append([max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad])
     boxes = np.array(boxes)
     # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
@@ -267,6 +317,7 @@ def build_bspline_data(seg_ctrl: np.ndarray) -> BSplineData:
         n_seg=opaque(n_seg, mi.UInt32),
         n_seg_host=n_seg,
         n_leaf_host=len(leaves),
+        r_squared=r_squared,
         bound_r=opaque(float(boxes[:, 1].max())),
         bound_z_lo=opaque(float(boxes[:, 2].min())),
         bound_z_hi=opaque(float(boxes[:, 3].max())),
@@ -434,20 +485,30 @@ def _bezier_square(p: list) -> list:
             p[2] * p[3], p[3] * p[3]]
 
 
-def _hull(Rb, Zb, ray: _Ray):
+def _bezier_elevate(p: list) -> list:
+    """Bernstein coefficients (degree 6) of a Bezier cubic: its product with
+    the constant 1 (``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i``)."""
+    return [p[0], (p[0] + p[1]) * 0.5, (p[0] + 3.0 * p[1] + p[2]) * 0.2,
+            (p[0] + 9.0 * (p[1] + p[2]) + p[3]) * 0.05, (p[1] + 3.0 * p[2] + p[3]) * 0.2,
+            (p[2] + p[3]) * 0.5, p[3]]
+
+
+def _hull(Rb, Zb, ray: _Ray, r_squared: bool = False):
     """Bernstein coefficients of ``F`` (eqs. 13-15, in the form of the module
     docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
-    float32 error of ``F`` and of these coefficients there."""
+    float32 error of ``F`` and of these coefficients there. ``r_squared``:
+    ``Rb`` holds ``R^2`` itself (eq. 20), not ``R``."""
     W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
     R = [Rb.x, Rb.y, Rb.z, Rb.w]
     W2 = _bezier_square(W)
-    R2 = _bezier_square(R)
+    R2 = _bezier_elevate(R) if r_squared else _bezier_square(R)
     k2 = ray.d.z * ray.d.z
     G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
     # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull).
     mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
-    mr = dr.maximum(dr.maximum(R[0], R[1]), dr.maximum(R[2], R[3]))
-    bound = dr.fma(ray.a, mw * mw, k2 * dr.fma(mr, mr, ray.r0sq))
+    Rm = [dr.abs(x) for x in R] if r_squared else R
+    mr = dr.maximum(dr.maximum(Rm[0], Rm[1]), dr.maximum(Rm[2], Rm[3]))
+    bound = dr.fma(ray.a, mw * mw, k2 * ((mr if r_squared else mr * mr) + ray.r0sq))
     return G, _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
 
 
@@ -474,7 +535,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
         base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        G, tol = _hull(Rb, Zb, ray)
+        G, tol = _hull(Rb, Zb, ray, data.r_squared)
         cand = m & ~_one_sign(G, tol)
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
@@ -500,11 +561,12 @@ class _Leaf:
         self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
-        self.Gb, self.tol = _hull(Rb, Zb, ray)
+        self.r_squared = data.r_squared  # R holds R^2 (eq. 20)
+        self.Gb, self.tol = _hull(Rb, Zb, ray, data.r_squared)
         # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 13-15, times d_z^2)
         W = [self.Z[0] - ray.zc] + self.Z[1:]
         W2 = _polymul(W, W)
-        R2 = _polymul(self.R, self.R)
+        R2 = self.R + [mi.Float(0.0)] * 3 if self.r_squared else _polymul(self.R, self.R)
         R2[0] = R2[0] - ray.r0sq
         k2 = ray.d.z * ray.d.z
         self.F = [dr.fma(ray.a, W2[k], -k2 * R2[k]) for k in range(7)]
@@ -525,17 +587,18 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_se
     tangent = ~found & (fmin <= tol)
     u = dr.select(found, u, dr.select(near0, x0, x1))
     Rt = _polyval(lf.R, u)
+    R2t = Rt if lf.r_squared else Rt * Rt  # R(t)^2
     Zt = _polyval(lf.Z, u)
     # A real hit has R(t) >= the ray's distance r0 from the axis. For
     # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
     # tangent roots at Z(t) = o_z must be checked against it.
-    ok = m & (found | tangent) & (Rt * Rt >= ray.r0sq * (1.0 - _R0_REL_TOL))
+    ok = m & (found | tangent) & (R2t >= ray.r0sq * (1.0 - _R0_REL_TOL))
     # s from eq. 15 for steep rays; else from |o_xy + s d_xy| = R(t),
     # s = s* -+ h, choosing the branch(es) consistent with z.
     steep = dz * dz >= ray.a
     inv_a = dr.rcp(dr.maximum(ray.a, 1e-30))
     s_z = (Zt - o.z) * dr.rcp(dz)
-    hh = dr.sqrt(dr.maximum(dr.fma(Rt, Rt, -ray.r0sq), 0.0) * inv_a)
+    hh = dr.sqrt(dr.maximum(R2t - ray.r0sq, 0.0) * inv_a)
     s1 = ray.s_star - hh
     s2 = ray.s_star + hh
     e1 = dr.abs(dr.fma(s1, dz, o.z) - Zt)
@@ -655,13 +718,15 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     for _ in range(_STEPS_POLISH):
         Rt, dR = _polyval_d(R, t)
         Zt, dZ = _polyval_d(Z, t)
+        # R(t)^2 and its derivative 2 R R' (the sor kind stores R^2 itself)
+        R2t, dR2 = (Rt, dR) if data.r_squared else (Rt * Rt, 2.0 * Rt * dR)
         qx = dr.fma(dh.x, s, o.x)
         qy = dr.fma(dh.y, s, o.y)
         g1 = dr.fma(dh.z, s, o.z) - Zt
-        g2 = dr.fma(qx, qx, dr.fma(qy, qy, -Rt * Rt))
+        g2 = dr.fma(qx, qx, dr.fma(qy, qy, -R2t))
         qd = dr.fma(qx, dh.x, qy * dh.y)
         # Jacobian [[d_z, -Z'], [2 q.d, -2 R R']].
-        j22 = -2.0 * Rt * dR
+        j22 = -dR2
         j21 = 2.0 * qd
         det = dr.fma(dh.z, j22, dZ * j21)
         scale_j = (dr.abs(dh.z) + dr.abs(j21)) * (dr.abs(dZ) + dr.abs(j22))
@@ -700,20 +765,29 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     Normal (eq. 16): the left-hand normal ``(-Z', R')`` of the tangent
     ``(R', Z')``, outward for a clockwise profile, rotated to the hit's
     azimuth (``cos = 1, sin = 0`` on the axis). Where the tangent vanishes
-    (the tripled end points of an open profile) the segment's chord gives its
-    limit direction. ``uv = (azimuth / 2 pi, (seg + u) / n_seg)``.
+    (the tripled end points of an open profile, a sor disc's centre) the
+    segment's chord gives its limit direction. ``uv = (azimuth / 2 pi, (seg +
+    u) / n_seg)``.
     """
     base = seg * _STRIDE
     R = [dr.gather(mi.Float, data.seg, base + k) for k in range(4)]
     Z = [dr.gather(mi.Float, data.seg, base + 4 + k) for k in range(4)]
     Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
+    tan_r, tan_z = dR, dZ
+    if data.r_squared:
+        # R holds R^2 (eq. 20): the tangent (R', Z') = ((R^2)' / 2R, Z') is
+        # parallel to ((R^2)', 2 R Z'), finite on the axis too.
+        radius = dr.sqrt(dr.maximum(Rt, 0.0))
+        tan_r, tan_z = dR, 2.0 * radius * dZ
+        dR = dR * dr.rcp(2.0 * dr.maximum(radius, 1e-6))
+        Rt = radius
     chord_r = R[1] + R[2] + R[3]
     chord_z = Z[1] + Z[2] + Z[3]
-    speed2 = dr.fma(dR, dR, dZ * dZ)
+    speed2 = dr.fma(tan_r, tan_r, tan_z * tan_z)
     degenerate = speed2 <= 1e-24 * dr.fma(chord_r, chord_r, chord_z * chord_z)
-    tr = dr.select(degenerate, chord_r, dR)
-    tz = dr.select(degenerate, chord_z, dZ)
+    tr = dr.select(degenerate, chord_r, tan_r)
+    tz = dr.select(degenerate, chord_z, tan_z)
     inv = dr.rsqrt(dr.fma(tr, tr, tz * tz))
     nr, nz = -tz * inv, tr * inv
 

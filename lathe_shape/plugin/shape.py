@@ -19,10 +19,24 @@
        flags a sharp vertex).
    * - ``kind``
      - string
-     - Profile kind: ``polyline`` (default; the points are the polyline) or
+     - Profile kind: ``polyline`` (default; the points are the polyline),
        ``bspline`` (the points are uniform cubic B-spline control points:
        closed periodic when the last equals the first, otherwise open with
-       tripled ends, which must then lie on the axis).
+       tripled ends, which must then lie on the axis), or one of POV-Ray's
+       curves: ``bezier`` (4 points per segment), ``catmull_rom`` (POV-Ray's
+       ``cubic_spline``: the first and last points only set tangents),
+       ``quadratic`` (``quadratic_spline``) and ``sor`` (points ``(r, h)``,
+       ``r^2`` a cubic in ``h``, closed by flat discs unless ``open``). A
+       profile CSV may name its kind in a ``# kind: NAME`` comment line
+       (as ``lathe-profile --from-pov`` writes); the parameter, when given,
+       must agree.
+   * - ``open``
+     - boolean
+     - The profile is a single open sheet, not the outline of a solid
+       (default: false, or the CSV's ``# open: true``): its ends need not
+       meet or lie on the axis, and it has no inside. A ``sor`` drops its
+       end discs. Use BSDFs that need no inside (``thindielectric``,
+       ``conductor``, ``twosided`` ...); a ``dielectric`` logs a warning.
    * - ``crease_angle``
      - float
      - Corners of the profile turning by more than this many degrees keep a
@@ -69,7 +83,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..profiles import ProfileError, parse_profile_string, read_points
+from ..profiles import ProfileError, parse_profile_string, read_points, read_profile_options
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .params import check_transform, describe_lathe, transform_property, typed_property
 from .reference_mesh import check_mesh_budget, reference_steps
@@ -110,18 +124,34 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
     Raises :class:`ValueError` naming the file or parameter on bad input.
     """
     who = describe_lathe(props)
-    kind = typed_property(props, "kind", str, "polyline", who)
     crease = typed_property(props, "crease_angle", float, 30.0, who)
     smooth = typed_property(props, "smooth", bool, True, who)
     if not (0.0 <= crease <= 180.0):
         raise ValueError(f"{who}: parameter 'crease_angle' must be within [0, 180] degrees, got {crease:g}")
+    points, sharp, labels, source = _read_points(props, who)
+    declared = read_profile_options(source) if "filename" in props else {}
+    kind = _option(props, "kind", str, declared, "polyline", who, source)
+    open_sheet = _option(props, "open", bool, declared, False, who, source)
     if kind not in SURFACE_KINDS:
         raise ValueError(
             f"{who}: parameter 'kind': unknown profile kind '{kind}' "
             f"(expected one of: {', '.join(SURFACE_KINDS)})"
         )
-    points, sharp, labels, source = _read_points(props, who)
-    return make_surface(kind, points, sharp, labels, source, crease, smooth)
+    return make_surface(kind, points, sharp, labels, source, crease, smooth, open_sheet)
+
+
+def _option(props: mi.Properties, name: str, kind: type, declared: dict, default, who: str,
+            source: str):
+    """A parameter that a profile CSV may also declare (``# name: value``):
+    the parameter, else the file's value, else ``default``; both given must
+    agree."""
+    if name not in declared:
+        return typed_property(props, name, kind, default, who)
+    value = declared[name]
+    if name in props and typed_property(props, name, kind, default, who) != value:
+        raise ValueError(f"{who}: parameter '{name}' is {props[name]!r} but the profile file "
+                         f"{source} declares '{name}: {value}'")
+    return value
 
 
 def _ring_bound(surface: PolylineSurface | BSplineSurface) -> int:
@@ -171,6 +201,18 @@ class LatheShape(mi.Mesh):
         # a merged lathe would lose its exact surface without a word.
         self.add_attribute(FACE_BAND_ATTRIBUTE, 1, mi.Float(self.local_mesh.face_band.astype(np.float32)))
         self._set_transform(self.to_world_matrix)
+        self._warn_open_dielectric(who)
+
+    def _warn_open_dielectric(self, who: str) -> None:
+        """An open sheet has no inside: a dielectric (which refracts into
+        an inside) renders it as the boundary of nothing in particular."""
+        bsdf = self.bsdf() if getattr(self.profile, "open_sheet", False) else None
+        name = str(bsdf).split("[", 1)[0] if bsdf is not None else ""
+        if name in ("SmoothDielectric", "RoughDielectric"):
+            mi.Log(mi.LogLevel.Warn,
+                   f"{who}: a {name} BSDF on an open profile (a single sheet, no inside): rays "
+                   f"refract into a solid that is not there; use 'thindielectric' for a thin "
+                   f"glass sheet, or close the profile")
 
     def _set_transform(self, matrix: np.ndarray) -> None:
         self.to_world_matrix = np.array(matrix, dtype=np.float64)

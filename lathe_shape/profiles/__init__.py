@@ -5,6 +5,9 @@
   arc spec) and the CSV writer;
 * :mod:`.polyline` -- the validated polyline :class:`Profile` (Method 1);
 * :mod:`.bspline` -- the validated :class:`BSplineProfile` (Method 2);
+* :mod:`.spline_kinds` -- POV-Ray's Bezier, Catmull-Rom (``cubic_spline``)
+  and quadratic curves as B-spline segments; :mod:`.sor` -- POV-Ray's
+  ``sor``; :mod:`.pov` -- the reader of POV-Ray ``lathe``/``sor`` blocks;
 * :mod:`.arcs` -- profiles from lines and equally divided arcs (section 2.3);
 * :mod:`.crossings` -- the one segment-intersection test both profile kinds
   use (``n log n``);
@@ -28,6 +31,7 @@ from .sources import (
     parse_profile_string,
     read_points,
     read_profile_csv,
+    read_profile_options,
     write_profile_csv,
 )
 
@@ -46,6 +50,7 @@ __all__ = [
     "parse_profile_string",
     "read_points",
     "read_profile_csv",
+    "read_profile_options",
     "spec_with_step",
     "write_profile_csv",
 ]

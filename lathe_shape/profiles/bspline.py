@@ -42,6 +42,10 @@ __all__ = [
     "BSplineProfile",
     "make_bspline_profile",
     "bspline_segments",
+    "validate_curve",
+    "control_points",
+    "cubic_ranges",
+    "adaptive_parameters",
     "is_closed",
     "power_coefficients",
     "evaluate",
@@ -51,6 +55,7 @@ __all__ = [
     "orient_clockwise",
     "sample_adaptive",
     "to_polyline",
+    "resample_curve",
 ]
 
 #: Power-basis matrix of the uniform cubic B-spline: ``C = M @ P`` gives the
@@ -108,34 +113,41 @@ def bspline_segments(points: np.ndarray, source: str = "profile") -> np.ndarray:
     (r < 0 anywhere, r = 0 other than at the open ends), has a cusp (zero
     tangent), encloses no area, or intersects itself.
     """
+    p = control_points(points, source, "B-spline")
+    seg, closed = _segment_controls(p, source)
+    validate_curve(seg, closed, source)
+    return seg
+
+
+def control_points(points: np.ndarray, source: str, what: str) -> np.ndarray:
+    """The control points of a ``what`` curve (``B-spline``, ``bezier``,
+    ...) as a finite (m, 2) float64 array, each coordinate below
+    :data:`.limits.MAX_COORDINATE`; raises :class:`BSplineError`."""
     try:
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as e:
-        raise BSplineError(f"{source}: B-spline control points are not numbers ({e})") from None
+        raise BSplineError(f"{source}: {what} control points are not numbers ({e})") from None
     if p.ndim != 2 or p.shape[1] != 2:
-        raise BSplineError(f"{source}: B-spline control points must be (r, z) pairs, "
+        raise BSplineError(f"{source}: {what} control points must be (r, z) pairs, "
                            f"got an array of shape {p.shape}")
     check_point_count(len(p), source, "control points", _CHECK_SAMPLES, BSplineError)
     if not np.all(np.isfinite(p)):
         bad = int(np.argwhere(~np.all(np.isfinite(p), axis=1))[0, 0])
-        raise BSplineError(f"{source}: B-spline control point {bad} is not finite: "
+        raise BSplineError(f"{source}: {what} control point {bad} is not finite: "
                            f"{p[bad].tolist()}")
     if np.any(np.abs(p) >= MAX_COORDINATE):
         bad = int(np.argwhere(np.any(np.abs(p) >= MAX_COORDINATE, axis=1))[0, 0])
-        raise BSplineError(f"{source}: B-spline control point {bad} is too large: {p[bad].tolist()} "
+        raise BSplineError(f"{source}: {what} control point {bad} is too large: {p[bad].tolist()} "
                            f"(|r| and |z| must be below {MAX_COORDINATE:g}: their squares must fit "
                            f"in float32)")
-
-    seg, closed = _segment_controls(p, source)
-    _validate_curve(seg, closed, source)
-    return seg
+    return p
 
 
 def _segment_controls(p: np.ndarray, source: str) -> tuple[np.ndarray, bool]:
     """Per-segment control points (closing or tripling the ends) of finite
     (m, 2) control points, and whether the form is closed; checks the point
     count and, for the open form, that the ends lie on the axis. No
-    geometric validation (:func:`_validate_curve` does that)."""
+    geometric validation (:func:`validate_curve` does that)."""
     closed = is_closed(p)
     if closed:
         q = p[:-1]
@@ -177,21 +189,29 @@ def _segments_closed(seg_ctrl: np.ndarray) -> bool:
     return bool(np.allclose(end, start, rtol=0, atol=1e-12 * _scale(seg_ctrl)))
 
 
-def _validate_curve(seg: np.ndarray, closed: bool, source: str) -> None:
-    """Geometric checks of :func:`bspline_segments` (see there). Every
-    tolerance is relative to the curve's size, so a scaled copy of a curve
-    is accepted or refused alike."""
+def validate_curve(seg: np.ndarray, closed: bool, source: str, what: str = "B-spline curve",
+                   solid: bool = True) -> None:
+    """Geometric checks of :func:`bspline_segments` (see there) of any
+    curve given by per-segment B-spline control points ``seg`` (every cubic
+    kind converts to them, :mod:`.spline_kinds`); ``what`` names the curve in
+    messages. ``solid=False`` (an open sheet) skips the enclosed-area test.
+    Every tolerance is relative to the curve's size, so a scaled copy of a
+    curve is accepted or refused alike."""
     scale = _scale(seg)
-    _check_axis(power_coefficients(seg), closed, 1e-9 * scale, source)
-    _check_regular(seg, closed, 1e-9 * scale, source)
+    _check_axis(power_coefficients(seg), closed, 1e-9 * scale, source, what)
+    _check_regular(seg, closed, 1e-9 * scale, source, what)
     # A curve that crosses itself can enclose no (net) area: the crossing
     # test comes first to name it.
-    _check_self_intersection(seg, closed, source)
-    if abs(signed_area(seg)) <= 1e-12 * scale * scale:
-        raise BSplineError(f"{source}: B-spline curve encloses no area")
+    _check_self_intersection(seg, closed, source, what)
+    if solid and abs(signed_area(seg)) <= 1e-12 * scale * scale:
+        raise BSplineError(f"{source}: {what} encloses no area")
 
 
-def _check_axis(coef: np.ndarray, closed: bool, tol: float, source: str) -> None:
+
+
+
+def _check_axis(coef: np.ndarray, closed: bool, tol: float, source: str,
+                what: str = "B-spline curve") -> None:
     """The curve stays off the axis (r > tol), but for the ends of an open
     curve: the exact minimum of R(t) per segment, at t = 0, 1 or a root of
     R'(t). The ends of an open curve are left out (with a small margin for
@@ -214,15 +234,16 @@ def _check_axis(coef: np.ndarray, closed: bool, tol: float, source: str) -> None
         r = np.polynomial.polynomial.polyval(ts, c)
         k = int(np.argmin(r))
         if r[k] < -tol:
-            raise BSplineError(f"{source}: B-spline curve crosses the axis (r < 0) near "
+            raise BSplineError(f"{source}: {what} crosses the axis (r < 0) near "
                                f"t={i + ts[k]:.4g} (segment {i}, r = {r[k]:.4g})")
         if r[k] <= tol:
-            raise BSplineError(f"{source}: B-spline curve touches the axis (r = 0) near "
+            raise BSplineError(f"{source}: {what} touches the axis (r = 0) near "
                                f"t={i + ts[k]:.4g} (segment {i}); only the ends of an open "
                                f"curve may lie on the axis")
 
 
-def _check_regular(seg: np.ndarray, closed: bool, tol: float, source: str) -> None:
+def _check_regular(seg: np.ndarray, closed: bool, tol: float, source: str,
+                   what: str = "B-spline curve") -> None:
     """The tangent may vanish only at the ends of an open curve (tripled
     control points); elsewhere a tangent shorter than ``tol`` is a cusp."""
     t = np.linspace(0.0, 1.0, _CHECK_SAMPLES + 1)
@@ -235,7 +256,7 @@ def _check_regular(seg: np.ndarray, closed: bool, tol: float, source: str) -> No
     slow = (speed <= tol) & ~ends
     if np.any(slow):
         i, j = np.argwhere(slow)[0]
-        raise BSplineError(f"{source}: B-spline curve has a cusp (zero tangent) near "
+        raise BSplineError(f"{source}: {what} has a cusp (zero tangent) near "
                            f"t={i + t[j]:.4g}; avoid tripled interior control points")
 
 
@@ -252,7 +273,8 @@ def _grid_values(seg: np.ndarray, t: np.ndarray, derivative: bool = False) -> tu
     return values[:, 0], values[:, 1]
 
 
-def _check_self_intersection(seg: np.ndarray, closed: bool, source: str) -> None:
+def _check_self_intersection(seg: np.ndarray, closed: bool, source: str,
+                             what: str = "B-spline curve") -> None:
     """Self-intersection test of the curve flattened to ``_CHECK_SAMPLES``
     chords per segment, with the polyline profiles' crossing routine
     (:func:`.crossings.first_crossing`, ``n log n`` in the chord count)."""
@@ -268,7 +290,7 @@ def _check_self_intersection(seg: np.ndarray, closed: bool, source: str) -> None
     u, v = meeting_parameters(pts[i], pts[(i + 1) % m], pts[j], pts[(j + 1) % m])
     point = pts[i] + u * (pts[(i + 1) % m] - pts[i])
     t1, t2 = (i + u) / _CHECK_SAMPLES, (j + v) / _CHECK_SAMPLES
-    raise BSplineError(f"{source}: B-spline curve intersects itself near t={t1:.4g} "
+    raise BSplineError(f"{source}: {what} intersects itself near t={t1:.4g} "
                        f"and t={t2:.4g} (point {point.round(6).tolist()})")
 
 
@@ -354,24 +376,52 @@ def _validated_clockwise(points: np.ndarray, source: str) -> tuple[np.ndarray, n
 
 @dataclass(frozen=True)
 class BSplineProfile:
-    """A validated, clockwise uniform cubic B-spline profile."""
+    """A validated, clockwise uniform cubic B-spline profile, or a profile
+    of another cubic kind (:mod:`.spline_kinds`) in the same per-segment
+    form."""
 
-    #: (m, 2) control points (clockwise; closed form without the repeat).
+    #: (m, 2) control points (B-splines: clockwise, closed form without the
+    #: repeat; other kinds: as given).
     points: np.ndarray
-    #: (n_seg, 4, 2) control points of each curve segment.
+    #: (n_seg, 4, 2) uniform B-spline control points of each curve segment
+    #: (clockwise for a solid).
     segment_controls: np.ndarray
-    #: True for the closed periodic form, False for the open form.
+    #: True when the curve's end is its start (closed loop).
     closed_loop: bool
     source: str
+    #: The profile kind (``bspline``, ``bezier``, ``catmull_rom``, ``quadratic``).
+    kind: str = "bspline"
+    #: True for a single open sheet (no inside), False for a solid.
+    open_sheet: bool = False
 
     @property
     def segment_count(self) -> int:
         return len(self.segment_controls)
 
     def bounds(self) -> tuple[float, float, float]:
-        """(r_max, z_min, z_max) of the control polygon (bounds the curve)."""
+        """(r_max, z_min, z_max) of the control polygon (bounds the curve);
+        for the other kinds, whose B-spline control points may lie far from
+        the curve, of the curve itself."""
+        if self.kind != "bspline":
+            coef = power_coefficients(self.segment_controls)
+            r, z = cubic_ranges(coef[:, 0]), cubic_ranges(coef[:, 1])
+            return float(r[:, 1].max()), float(z[:, 0].min()), float(z[:, 1].max())
         c = self.segment_controls.reshape(-1, 2)
         return float(c[:, 0].max()), float(c[:, 1].min()), float(c[:, 1].max())
+
+
+def cubic_ranges(c: np.ndarray) -> np.ndarray:
+    """(n, 2) exact (min, max) on [0, 1] of the cubics with ascending
+    coefficients ``c`` (n, 4): at the ends or a root of the derivative."""
+    out = []
+    for ck in c:
+        ts = [0.0, 1.0]
+        if np.any(ck[1:] != 0):
+            ts += [float(x.real) for x in np.roots([3 * ck[3], 2 * ck[2], ck[1]])
+                   if abs(x.imag) < 1e-12 and 0.0 < x.real < 1.0]
+        v = np.polynomial.polynomial.polyval(np.array(ts), ck)
+        out.append((v.min(), v.max()))
+    return np.array(out)
 
 
 def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
@@ -417,14 +467,24 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
     if max_error is None:
         max_error = 1e-4 * _scale(seg_ctrl)
-    cos_max = math.cos(math.radians(max_angle_deg))
 
     def point(i: int, t: float) -> np.ndarray:
         r, z = evaluate(seg_ctrl, i, t)
         return np.array([float(r), float(z)])
 
+    return adaptive_parameters(len(seg_ctrl), point, lambda i, t: _tangent_dir(seg_ctrl, i, t),
+                               max_angle_deg, max_error, max_depth)
+
+
+def adaptive_parameters(n_seg: int, point, tangent, max_angle_deg: float, max_error: float,
+                        max_depth: int = 16) -> list[tuple[int, float]]:
+    """The bisection of :func:`sample_adaptive` for any curve of ``n_seg``
+    segments: ``point(i, t)`` its (r, z) point, ``tangent(i, t)`` its unit
+    tangent (used by the ``sor`` kind, whose radius is a square root)."""
+    cos_max = math.cos(math.radians(max_angle_deg))
+
     def flat(i: int, t0: float, t1: float) -> bool:
-        if float(np.dot(_tangent_dir(seg_ctrl, i, t0), _tangent_dir(seg_ctrl, i, t1))) < cos_max:
+        if float(np.dot(tangent(i, t0), tangent(i, t1))) < cos_max:
             return False
         a, b = point(i, t0), point(i, t1)
         ab = b - a
@@ -437,7 +497,7 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
         return True
 
     out: list[tuple[int, float]] = []
-    for i in range(len(seg_ctrl)):
+    for i in range(n_seg):
         stack = [(0.0, 1.0, 0)]
         while stack:  # depth-first, left piece first: keeps curve order
             t0, t1, depth = stack.pop()
@@ -447,7 +507,7 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
                 stack.append((t0, tm, depth + 1))
             else:
                 out.append((i, t0))
-    out.append((len(seg_ctrl) - 1, 1.0))
+    out.append((n_seg - 1, 1.0))
     return out
 
 
@@ -462,12 +522,20 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
         stretches still get points.
 
     Returns an (n_points, 2) array of ``(r, z)`` points on the curve. A
-    closed curve gives a closed polyline (last point == first point); an open
-    one starts and ends on the axis (r = 0 exactly).
+    closed curve gives a closed polyline (last point == first point); an
+    end on the axis stays exactly on it (r = 0).
     """
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
-    n_seg = len(seg_ctrl)
-    closed = _segments_closed(seg_ctrl)
+    return resample_curve(lambda T: _eval_global(seg_ctrl, T), len(seg_ctrl),
+                          _segments_closed(seg_ctrl), _scale(seg_ctrl), n_points, method)
+
+
+def resample_curve(eval_global, n_seg: int, closed: bool, scale: float, n_points: int,
+                   method: str = "uniform") -> np.ndarray:
+    """:func:`to_polyline` of any curve of ``n_seg`` segments:
+    ``eval_global(T)`` gives its (len(T), 2) points at global parameters
+    ``T = segment + t``; ``scale`` is its size (ends within ``1e-12 scale``
+    of the axis are put on it)."""
     n_min = 4 if closed else 3
     if n_points < n_min:
         raise BSplineError(f"to_polyline: need at least {n_min} points, got {n_points}")
@@ -479,7 +547,7 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
         # 256 samples per segment, fewer for very many segments (bounded memory).
         per_segment = max(16, min(256, _DENSE_SAMPLES // n_seg))
         dense = np.linspace(0.0, n_seg, per_segment * n_seg + 1)
-        pts = _eval_global(seg_ctrl, dense)
+        pts = eval_global(dense)
         chord = np.diff(pts, axis=0)
         length = np.hypot(chord[:, 0], chord[:, 1])
         ang = np.arctan2(chord[:, 1], chord[:, 0])
@@ -494,11 +562,12 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
     else:
         raise BSplineError(f"to_polyline: unknown method {method!r} (use 'uniform' or 'adaptive')")
     T[0], T[-1] = 0.0, float(n_seg)
-    pts = _eval_global(seg_ctrl, T)
+    pts = eval_global(T)
     if closed:
         pts[-1] = pts[0]
-    else:
-        pts[0, 0] = pts[-1, 0] = 0.0
+    else:  # ends on the axis stay exactly there (an open sheet's need not be)
+        near_axis = np.abs(pts[[0, -1], 0]) <= 1e-12 * scale
+        pts[[0, -1], 0] = np.where(near_axis, 0.0, pts[[0, -1], 0])
     return pts
 
 

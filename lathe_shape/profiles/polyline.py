@@ -70,6 +70,9 @@ class Profile:
     normal_start: np.ndarray
     #: (m, 2) unit shading normal (nr, nz) at each segment's end.
     normal_end: np.ndarray
+    #: True for a single open sheet (no inside; ends anywhere), False for
+    #: the profile of a solid.
+    open_sheet: bool = False
 
     @property
     def segment_count(self) -> int:
@@ -104,8 +107,10 @@ def make_profile(
     labels: Sequence[str] | None = None,
     source: str = "profile",
     crease_angle: float = 30.0,
+    open_sheet: bool = False,
 ) -> Profile:
-    """Validate raw points and build the canonical clockwise :class:`Profile`.
+    """Validate raw points and build the canonical clockwise :class:`Profile`
+    (with ``open_sheet``: a single open sheet, see :func:`_open_profile`).
 
     Raises :class:`ProfileError` naming ``source`` (and the offending point's
     label) for: too many points (:mod:`.limits`), fewer than 3 points,
@@ -128,6 +133,8 @@ def make_profile(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
         )
     _check_coordinates(pts, labels)
+    if open_sheet:
+        return _open_profile(pts, flags, labels, source, crease_angle)
     pts, flags, closed_loop = _closed_chain(pts, flags, source)
     _check_segment_lengths(pts, labels, closed_loop)
 
@@ -156,6 +163,45 @@ def make_profile(
         normal_start=n_start,
         normal_end=n_end,
     )
+
+
+def _open_profile(pts: np.ndarray, flags: np.ndarray, labels: Sequence[str], source: str,
+                  crease_angle: float) -> Profile:
+    """An open sheet: the chain as written (no closure, orientation or area
+    test; its ends may lie anywhere with ``r >= 0``), at least 2 points, no
+    zero-length segment and no self-intersection. The outward side of the
+    sheet is the left of the chain, as for a solid's clockwise profile; the
+    chain is reversed, if need be, so that it faces away from the axis."""
+    if len(pts) < 2:
+        raise ProfileError(f"{source}: an open profile needs at least 2 points, got {len(pts)}")
+    _check_segment_lengths(pts, labels, False)
+    tol = touch_tolerance(pts)
+    e_in, e_out = pts[1:-1] - pts[:-2], pts[2:] - pts[1:-1]
+    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+    longer = np.maximum(np.hypot(e_in[:, 0], e_in[:, 1]), np.hypot(e_out[:, 0], e_out[:, 1]))
+    folds = (np.abs(cross) <= tol * longer) & (np.einsum("ij,ij->i", e_in, e_out) < 0.0)
+    if folds.any():
+        k = int(np.argmax(folds)) + 1
+        raise ProfileError(f"{labels[k]}: profile intersects itself: it folds back at ({_fmt(pts[k])})")
+    pair = first_crossing(pts, closed=False, tol=tol)
+    if pair is not None:
+        i, j = pair
+        raise ProfileError(f"{source}: profile intersects itself: segment ({_fmt(pts[i])}) -> "
+                           f"({_fmt(pts[i + 1])}) meets segment ({_fmt(pts[j])}) -> ({_fmt(pts[j + 1])})")
+    # Outward = away from the axis: the chain runs downwards on the whole
+    # (sum of r dz < 0), like a solid's outer wall; a flat sheet keeps its way.
+    r_dz = float(np.sum((pts[1:, 0] + pts[:-1, 0]) * np.diff(pts[:, 1])))
+    if r_dz > tol * _extent(pts):
+        pts, flags = pts[::-1], flags[::-1]
+    pts, flags = np.ascontiguousarray(pts), np.ascontiguousarray(flags)
+    segments = _surface_segments(pts, False)
+    if len(segments) == 0:
+        raise ProfileError(f"{source}: open profile lies on the axis: it sweeps no surface")
+    n_start, n_end = _segment_end_normals(pts, flags, False, segments, crease_angle)
+    pts.setflags(write=False)
+    return Profile(points=pts, sharp=flags, closed_loop=False, source=source,
+                   crease_angle=float(crease_angle), segments=segments, normal_start=n_start,
+                   normal_end=n_end, open_sheet=True)
 
 
 def _check_coordinates(pts: np.ndarray, labels: Sequence[str]) -> None:

@@ -19,6 +19,11 @@ refused; ``inf`` and ``nan`` are read and then refused by the validation as
 non-finite. ``labels[k]`` names point ``k`` (file and line, or parameter and
 position) in error messages. :func:`format_profile_csv` / :func:`write_profile_csv`
 are the one CSV writer (the inverse of :func:`read_profile_csv`).
+
+A CSV file may declare how its points are read in comment lines of the form
+``# kind: NAME`` (a profile kind: ``bspline``, ``bezier``, ``sor`` ...) and
+``# open: true`` (a single open sheet); :func:`read_profile_options` reads
+them, and the writer's ``options`` writes them.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ __all__ = [
     "read_profile_csv",
     "format_profile_csv",
     "write_profile_csv",
+    "read_profile_options",
 ]
 
 #: File name endings read as arc specs; anything else is read as CSV.
@@ -99,6 +105,39 @@ def read_profile_csv(path: str | os.PathLike) -> RawPoints:
     return rows.raw_points()
 
 
+#: ``# key: value`` declarations of a profile CSV (see the module docstring).
+_OPTION = re.compile(r"#\s*(kind|open)\s*:\s*(\S+)\s*$", re.IGNORECASE)
+
+
+def read_profile_options(path: str | os.PathLike) -> dict:
+    """The ``# kind: NAME`` and ``# open: true|false`` declarations of a
+    profile CSV file (``{}`` for none, or for an arc spec): ``{"kind": str,
+    "open": bool}``. Raises :class:`ProfileError` naming the file and line
+    for an ``open`` value other than true/false."""
+    path = os.fspath(path)
+    if path.lower().endswith(SPEC_SUFFIXES):
+        return {}
+    options: dict = {}
+    try:
+        with open(path, "rb") as f:
+            for number, raw in _numbered_lines(f):
+                line = decode_utf8(raw, path, number).strip()
+                match = _OPTION.match(line) if line.startswith("#") else None
+                if match is None:
+                    continue
+                key, value = match.group(1).lower(), match.group(2)
+                if key == "open":
+                    if value.lower() not in ("true", "false"):
+                        raise ProfileError(f"{path}, line {number}: 'open' must be true or false, "
+                                           f"got {value!r}")
+                    options[key] = value.lower() == "true"
+                else:
+                    options[key] = value
+    except OSError as e:
+        raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
+    return options
+
+
 def _numbered_lines(f: BinaryIO) -> Iterator[tuple[int, bytes]]:
     """``(line number, bytes)`` of a binary file, without the line ends;
     ``\n``, ``\r\n`` and ``\r`` all end a line (as in text mode)."""
@@ -112,12 +151,16 @@ def _numbered_lines(f: BinaryIO) -> Iterator[tuple[int, bytes]]:
 
 
 def format_profile_csv(
-    points: np.ndarray, sharp: np.ndarray | None = None, header: str = "", number_format: str = ".9g"
+    points: np.ndarray, sharp: np.ndarray | None = None, header: str = "", number_format: str = ".9g",
+    options: dict | None = None,
 ) -> str:
-    """CSV text of a profile: ``header`` lines as ``#`` comments, then
+    """CSV text of a profile: ``header`` lines as ``#`` comments, the
+    ``options`` (``kind``, ``open``) as ``# key: value`` declarations, then
     ``r,z,sharp`` rows (``r,z`` rows when ``sharp`` is None), numbers written
     with ``number_format`` (e.g. ``".6f"``)."""
     lines = [f"# {line}" for line in header.splitlines()]
+    for key, value in (options or {}).items():
+        lines.append(f"# {key}: {str(value).lower() if isinstance(value, bool) else value}")
     if sharp is None:
         lines.append("r,z")
         lines += [f"{r:{number_format}},{z:{number_format}}" for r, z in points]
@@ -134,11 +177,12 @@ def write_profile_csv(
     sharp: np.ndarray | None = None,
     header: str = "",
     number_format: str = ".9g",
+    options: dict | None = None,
 ) -> str:
     """Write :func:`format_profile_csv` to ``path``; returns the path."""
     path = os.fspath(path)
     with open(path, "w", encoding="utf-8") as f:
-        f.write(format_profile_csv(points, sharp, header, number_format))
+        f.write(format_profile_csv(points, sharp, header, number_format, options))
     return path
 
 
