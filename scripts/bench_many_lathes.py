@@ -12,7 +12,7 @@ Scenes load through `tools.scenes.load_string_in`, which loads scenes of more
 than 64 lathes sequentially (in parallel, hundreds of lathes exceed Python's
 recursion limit).
 
-    python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy]
+    python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy] [--buried]
                                         [--resolution 128x128] [--spp 4] [--repeats 3]
                                         [--variant llvm_ad_rgb]
 """
@@ -31,15 +31,21 @@ ROOT = Path(__file__).resolve().parents[1]
 PROFILE = ROOT / "scenes" / "wine_glass.csv"
 
 
-def scene_text(count: int, reference: str, width: int, height: int) -> str:
-    """A grid of ``count`` glasses, 32 to a row, 12 units apart."""
-    glasses = "\n".join(
-        f'<shape type="lathe" id="glass_{i}"><string name="filename" value="{PROFILE}"/>'
-        f'<string name="reference" value="{reference}"/><integer name="mesh_segments" value="512"/>'
-        f'<transform name="to_world"><translate x="{(i % 32) * 12 - 186}" y="{(i // 32) * 12}"/>'
-        '</transform><bsdf type="dielectric"/></shape>'
-        for i in range(count)
-    )
+def glass_text(i: int, reference: str, buried: bool) -> str:
+    """Glass ``i`` of the grid: 32 to a row, 12 units apart; ``buried``: 8
+    rows, and the glasses after the 256th 100 units under the floor."""
+    x, row = (i % 32) * 12 - 186, i // 32
+    y, z = (row % 8 * 12, -100 * (i // 256)) if buried else (row * 12, 0)
+    return (f'<shape type="lathe" id="glass_{i}"><string name="filename" value="{PROFILE}"/>'
+            f'<string name="reference" value="{reference}"/><integer name="mesh_segments" value="512"/>'
+            f'<transform name="to_world"><translate x="{x}" y="{y}" z="{z}"/></transform>'
+            '<bsdf type="dielectric"/></shape>')
+
+
+def scene_text(count: int, reference: str, width: int, height: int, buried: bool = False) -> str:
+    """A grid of ``count`` glasses (:func:`glass_text`; ``buried``: the image
+    of 256 glasses at the cost of ``count`` lathes) on a floor."""
+    glasses = "\n".join(glass_text(i, reference, buried) for i in range(count))
     return f"""<scene version="3.0.0">
     <sensor type="perspective">
         <transform name="to_world"><lookat origin="0,-80,90" target="0,60,0" up="0,0,1"/></transform>
@@ -54,7 +60,7 @@ def scene_text(count: int, reference: str, width: int, height: int) -> str:
 
 
 def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str,
-            repeats: int) -> dict:
+            repeats: int, buried: bool = False) -> dict:
     """One case, in this process: load time, first render time, median and
     spread of ``repeats`` further renders, peak RSS."""
     import resource
@@ -66,7 +72,7 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
 
     select_variant(variant)
     start = time.perf_counter()
-    scene = load_string_in(ROOT, scene_text(count, reference, *size))
+    scene = load_string_in(ROOT, scene_text(count, reference, *size, buried))
     load = time.perf_counter() - start
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
     times = []
@@ -88,15 +94,18 @@ def main() -> None:
     parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"])
     add_render_options(parser, spp_default=4, resolution_default="128x128", defines=False)
     parser.add_argument("--repeats", type=int, default=3, help="renders timed after the first (default: 3)")
+    parser.add_argument("--buried", action="store_true",
+                        help="glasses after the 256th under the floor: the image of 256, the cost of more")
     parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: run one case, print JSON
     args = parser.parse_args()
     size = parse_resolution(args.resolution)
     if args.case:
         count, reference = args.case.split(":")
-        print(json.dumps(measure(int(count), reference, size, args.spp, args.variant, args.repeats)))
+        print(json.dumps(measure(int(count), reference, size, args.spp, args.variant, args.repeats,
+                                 args.buried)))
         return
     print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, lathe_path max_depth 6, "
-          "one process per case")
+          f"one process per case{', glasses after the 256th buried' if args.buried else ''}")
     print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'compile [s]':>13}"
           f"{'render [s]':>12}{'(min-max)':>14}{'vs 256':>8}")
     for reference in args.references:
@@ -104,7 +113,7 @@ def main() -> None:
         for count in args.counts:
             command = [sys.executable, __file__, "--case", f"{count}:{reference}", "--resolution",
                        args.resolution, "--spp", str(args.spp), "--repeats", str(args.repeats),
-                       "--variant", args.variant]
+                       "--variant", args.variant] + (["--buried"] if args.buried else [])
             result = subprocess.run(command, capture_output=True, text=True)
             if result.returncode != 0:
                 print(f"{count:>7}{reference:>10}  failed: {result.stderr.strip().splitlines()[-1:]}")

@@ -193,18 +193,35 @@ def _local_box(data: LatheData) -> np.ndarray:
 # Top level: a BVH over world boxes, one stackless copy per ray octant
 # ---------------------------------------------------------------------------
 
-def _median_tree(lo: np.ndarray, hi: np.ndarray, idx: np.ndarray):
+def _half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Half the surface area of boxes ``(lo, hi)`` (rows): the chance that
+    a random ray meets one is proportional to it."""
+    e = np.maximum(hi - lo, 0.0)
+    return e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0]
+
+
+def _sah_tree(lo: np.ndarray, hi: np.ndarray, idx: np.ndarray):
     """Tree over the boxes ``idx``: ``(index, bounds)`` for a leaf, else
-    ``(axis, bounds, lower, upper)``, split at the median centre along the
-    axis where the centres spread most."""
+    ``(axis, bounds, lower, upper)``. The split, along any axis between
+    boxes sorted by centre, minimises the surface area heuristic (each
+    side's area times its box count), so that lathes far apart (say a
+    shelf and a row elsewhere) part near the root."""
     bounds = np.concatenate([lo[idx].min(axis=0), hi[idx].max(axis=0)])
     if len(idx) == 1:
         return int(idx[0]), bounds
-    centre = lo[idx] + hi[idx]
-    axis = int(np.argmax(centre.max(axis=0) - centre.min(axis=0)))
-    order = idx[np.argsort(centre[:, axis], kind="stable")]
-    half = len(order) // 2
-    return axis, bounds, _median_tree(lo, hi, order[:half]), _median_tree(lo, hi, order[half:])
+    count = np.arange(1, len(idx))
+    best = None
+    for axis in range(3):
+        order = idx[np.argsort(lo[idx, axis] + hi[idx, axis], kind="stable")]
+        a, b = lo[order], hi[order]
+        left = _half_area(np.minimum.accumulate(a)[:-1], np.maximum.accumulate(b)[:-1])
+        right = _half_area(np.minimum.accumulate(a[::-1])[::-1][1:], np.maximum.accumulate(b[::-1])[::-1][1:])
+        cost = left * count + right * count[::-1]
+        k = int(np.argmin(cost))
+        if best is None or cost[k] < best[0]:
+            best = (cost[k], axis, order, k + 1)
+    _, axis, order, half = best
+    return axis, bounds, _sah_tree(lo, hi, order[:half]), _sah_tree(lo, hi, order[half:])
 
 
 def octant_bvh(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -218,7 +235,7 @@ def octant_bvh(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     child of a split along axis ``k`` first when bit ``k`` of ``c`` is set
     (the ray goes towards -k)."""
     boxes = np.asarray(boxes, dtype=np.float64)
-    tree = _median_tree(boxes[:, :3], boxes[:, 3:], np.arange(len(boxes)))
+    tree = _sah_tree(boxes[:, :3], boxes[:, 3:], np.arange(len(boxes)))
     records: list = []
     links: list = []
     for copy in range(8):
