@@ -7,7 +7,6 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-import pytest
 
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
 from lathe_shape.plugin.shape import LatheShape
@@ -80,9 +79,8 @@ def vectors(v) -> np.ndarray:
     return np.stack([c.numpy() for c in v], axis=1)
 
 
-@pytest.mark.parametrize("count", [9, 40])
-def test_sets_agree_with_lathes_one_by_one(count):
-    scene = lathe_scene(count)
+def test_sets_agree_with_lathes_one_by_one():
+    scene = lathe_scene(24)
     geometry = ExactSceneGeometry(scene)
     assert {g.lathes[0].surface.kind for g in geometry.groups} == {"polyline", "bspline"}
     assert not geometry.single
