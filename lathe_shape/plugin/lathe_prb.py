@@ -82,7 +82,10 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     lights apart)."""
     is_surface = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Surface)
     is_infinite = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
-    ds.d = dr.replace_grad(ds.d, dr.select(is_infinite, ds.d, dr.normalize(ds.p - si.p)))
+    to_light = ds.p - si.p
+    ds.d = dr.replace_grad(ds.d, dr.select(is_infinite, ds.d, dr.normalize(to_light)))
+    # Point lights fall off with this distance (prb keeps it detached)
+    ds.dist = dr.replace_grad(ds.dist, dr.select(is_infinite, ds.dist, dr.norm(to_light)))
     # A moving shading point changes the solid angle of the sampled area
     J = solid_angle_to_area_jacobian(si.p, dr.detach(ds.p), dr.detach(ds.n), active & is_surface)
     em_val = scene.eval_emitter_direction(si, ds, active)

@@ -122,10 +122,12 @@ def _end_blend(profile, seg_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                     average / np.linalg.norm(average), target, atol=1e-9):
                 blend[k, side] = (1.0, 1.0, 0.0, 0.0)
                 neighbour[k, side] = nb
-            elif np.allclose(seg_n[k], target, atol=1e-9) and abs(target[0]) > 1e-12:
-                blend[k, side] = (1.0, 0.0, 0.0, 0.0)
-            else:  # the axial normal of a smooth cap: fixed
+            elif profile.points[profile.segments[k, side], 0] == 0.0 and target[0] == 0.0:
+                # A chain end on the axis with the axial normal (a smooth
+                # cap): fixed while the cap stays within the crease angle
                 blend[k, side] = (0.0, 0.0, target[0], target[1])
+            else:  # a crease (or a cone's tip): the segment's own normal
+                blend[k, side] = (1.0, 0.0, 0.0, 0.0)
     return blend, neighbour
 
 
