@@ -1,0 +1,124 @@
+"""Differentiable lathes: the ``points`` parameter and ``lathe_prb``
+gradients against central finite differences of the exact render."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from lathe_shape.plugin.shape import scene_lathes
+from lathe_shape.profiles import ProfileError
+from lathe_shape.tools.diff_scenes import DEFAULT_PROFILE, lathe_scene
+from lathe_shape.tools.gradients import check_gradient, forward_gradient, points_key
+
+#: Flat indices into DEFAULT_PROFILE's points "0 0, 0.6 0, 0.7 0.35, 0.72
+#: 0.7, 0.6 1.0, 0.4 1.2, 0 1.2": r of a smooth vertex on the bowl, r of the
+#: creased rim of the top cap, z of the top point on the axis.
+CASES = {"bowl": 6, "crease": 10, "axis": 13}
+
+#: The same points as B-spline control points: the bottom corner (where the
+#: curve turns most sharply) stands in for the crease.
+BSPLINE_CASES = {"bowl": 6, "corner": 2, "axis": 13}
+
+
+def _points_params(scene):
+    params = mi.traverse(scene)
+    return params, points_key(params, scene_lathes(scene)[0])
+
+
+# -- the parameter -----------------------------------------------------------
+
+def test_points_exposed_in_user_order():
+    scene = lathe_scene(resolution=8)
+    params, key = _points_params(scene)
+    assert key == "lathe.points"
+    given = np.array([[float(v) for v in p.split()] for p in DEFAULT_PROFILE.split(",")])
+    # The canonical (clockwise) profile is the reverse; the parameter keeps the user's order
+    np.testing.assert_allclose(np.array(params[key]).reshape(-1, 2), given, atol=1e-7)
+
+
+def test_update_rebuilds_kernel_and_mesh():
+    scene = lathe_scene(resolution=8)
+    params, key = _points_params(scene)
+    values = np.array(params[key])
+    values[6] = 1.5  # the bowl's widest vertex moves out
+    params[key] = mi.Float(values)
+    params.update()
+    lathe = scene_lathes(scene)[0]
+    assert lathe.profile.bounds()[0] == pytest.approx(1.5)
+    assert scene.bbox().max.x == pytest.approx(1.5, rel=1e-3)
+    ray = mi.Ray3f(mi.Point3f(3.0, 0.0, 0.7), mi.Vector3f(-1.0, 0.0, 0.0))
+    assert lathe.ray_intersect_exact(ray).t[0] == pytest.approx(1.5, rel=1e-5)
+    assert scene.ray_intersect(ray).t[0] == pytest.approx(1.5, rel=1e-2)  # the reference mesh
+
+
+@pytest.mark.parametrize("bad, message", [(-0.5, "negative radius"), (float("nan"), "non-finite"),
+                                          (0.0, "intersects itself")])
+def test_invalid_update_keeps_previous_profile(bad, message):
+    scene = lathe_scene(resolution=8)
+    params, key = _points_params(scene)
+    before = np.array(params[key])
+    values = before.copy()
+    if message == "intersects itself":
+        values[8:10] = [1.0, 0.2]  # (0.6, 1.0) dragged below the bowl
+    else:
+        values[6] = bad
+    params[key] = mi.Float(values)
+    with pytest.raises(ProfileError, match=message):
+        params.update()
+    np.testing.assert_array_equal(np.array(params[key]), before)
+    assert scene_lathes(scene)[0].profile.bounds()[0] == pytest.approx(0.72)
+
+
+def test_points_from_xml(tmp_path):
+    xml = tmp_path / "scene.xml"
+    xml.write_text(
+        '<scene version="3.0.0"><shape type="lathe" id="glass">'
+        '<string name="profile" value="0 0, 1 0, 1 1, 0 1"/></shape></scene>'
+    )
+    scene = mi.load_file(str(xml))
+    params = mi.traverse(scene)
+    np.testing.assert_allclose(np.array(params["glass.points"]), [0, 0, 1, 0, 1, 1, 0, 1])
+    params["glass.points"] = mi.Float([0, 0, 2, 0, 2, 1, 0, 1])
+    params.update()
+    assert scene.bbox().max.x == pytest.approx(2.0, rel=1e-3)
+
+
+# -- gradients ----------------------------------------------------------------
+
+@pytest.mark.parametrize(
+    "kind, case", [("polyline", c) for c in CASES] + [("bspline", c) for c in BSPLINE_CASES]
+)
+def test_gradient_matches_finite_differences(kind, case):
+    scene = lathe_scene(kind=kind, resolution=32)
+    index = (CASES if kind == "polyline" else BSPLINE_CASES)[case]
+    check = check_gradient(scene, scene_lathes(scene)[0], index, h=1e-3, spp=4, seed=3)
+    assert abs(check.fd_interior) > 0.5  # the FD stands far above its float32 noise
+    assert check.interior_error < 0.1, check
+
+
+def test_forward_equals_backward():
+    scene = lathe_scene(resolution=24)
+    params, key = _points_params(scene)
+    forward = [forward_gradient(scene, key, i, spp=4, seed=5).sum() for i in (6, 13)]
+    value = params[key]
+    dr.enable_grad(value)
+    params.update()
+    film = scene.sensors()[0].film()
+    weights = mi.TensorXf(np.ones((film.size()[1], film.size()[0], 3), dtype=np.float32))
+    scene.integrator().render_backward(scene, params, weights, seed=5, spp=4)
+    backward = np.array(dr.grad(value))
+    np.testing.assert_allclose(backward[[6, 13]], forward, rtol=1e-3, atol=1e-4)
+
+
+def test_invisible_lathe_has_zero_gradient():
+    scene = lathe_scene(resolution=16, offset=(0.0, 0.0, 40.0))  # far above the view
+    params, key = _points_params(scene)
+    value = params[key]
+    dr.enable_grad(value)
+    params.update()
+    image = mi.render(scene, params, spp=4, seed=1)
+    dr.backward(dr.sum(image, axis=None))
+    assert np.all(np.array(dr.grad(value)) == 0.0)
