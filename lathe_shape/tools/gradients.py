@@ -13,17 +13,19 @@ one profile segment only, in all of their footprint and their neighbours';
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..plugin.scene_geometry import ExactSceneGeometry
-from ..plugin.shape import LatheShape
+if TYPE_CHECKING:
+    from ..plugin.shape import LatheShape
 
 __all__ = ["GradientCheck", "check_gradient", "finite_difference", "forward_gradient",
-           "pixel_classes", "points_key"]
+           "gradient_times", "pixel_classes", "points_key", "set_points"]
 
 
 def points_key(params: mi.SceneParameters, lathe: LatheShape) -> str:
@@ -79,6 +81,8 @@ def pixel_classes(scene: mi.Scene, lathe: LatheShape, sub: int = 4,
     ``sub x sub`` exact rays per pixel: interior pixels (and their 8
     neighbours) see one segment of ``lathe`` in all their rays; silhouette
     pixels (dilated by one) see it in some rays only."""
+    from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant
+
     camera = scene.sensors()[sensor]
     width, height = camera.film().crop_size()
     jx, jy = np.meshgrid((np.arange(sub) + 0.5) / sub, (np.arange(sub) + 0.5) / sub)
@@ -137,3 +141,45 @@ def check_gradient(scene: mi.Scene, lathe: LatheShape, index: int, h: float, spp
     interior, silhouette = pixel_classes(scene, lathe)
     return GradientCheck(float(ad[interior].sum()), float(fd[interior].sum()),
                          float(ad[silhouette].sum()), float(fd[silhouette].sum()), float(fd.sum()))
+
+
+def gradient_times(scene: mi.Scene, primal: mi.Integrator, spp: int, repeat: int,
+                   seed: int = 0) -> dict[str, list[float]]:
+    """Wall times of the primal render with ``primal`` (e.g. ``lathe_path``)
+    and of one backward pass of the scene's own integrator (``lathe_prb``:
+    ``render_backward``, with its primal replay, for the gradient of the
+    image sum with respect to every lathe's points), interleaved, after one
+    warm-up of each (which pays the JIT compilation)."""
+    from ..plugin.shape import scene_lathes  # needs a variant
+
+    params = mi.traverse(scene)
+    keys = [points_key(params, lathe) for lathe in scene_lathes(scene)]
+    for key in keys:
+        dr.enable_grad(params[key])
+    params.update()
+    film = scene.sensors()[0].film()
+    channels = film.base_channels_count()
+    weights = mi.TensorXf(dr.full(mi.Float, 1.0, film.size()[0] * film.size()[1] * channels),
+                          (film.size()[1], film.size()[0], channels))
+
+    def run_primal(k):
+        mi.render(scene, spp=spp, seed=seed + k, integrator=primal).numpy()
+
+    def run_backward(k):
+        scene.integrator().render_backward(scene, params, weights, seed=seed + k, spp=spp)
+        for key in keys:
+            dr.grad(params[key]).numpy()
+            dr.clear_grad(params[key])
+
+    cases = {"primal": run_primal, "backward": run_backward}
+    for run in cases.values():
+        run(0)
+    times: dict[str, list[float]] = {name: [] for name in cases}
+    for k in range(1, repeat + 1):
+        for name, run in cases.items():
+            start = time.perf_counter()
+            run(k)
+            times[name].append(time.perf_counter() - start)
+    for key in keys:
+        dr.disable_grad(params[key])
+    return times
