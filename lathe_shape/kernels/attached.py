@@ -17,7 +17,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["AttachedHit", "attached_polyline", "attached_bspline"]
+__all__ = ["AttachedHit", "attached_polyline", "attached_bspline", "profile_point"]
 
 
 class AttachedHit:
@@ -158,3 +158,17 @@ def attached_bspline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t: 
     normal = dr.normalize(mi.Vector2f(-tangent.y, tangent.x))
     n = _revolve(normal, cos_phi, sin_phi)
     return AttachedHit(t_att, p, n, mi.Vector3f(n))
+
+
+def profile_point(points: mi.Float, index, kind: str, seg: mi.UInt32,
+                  u: mi.Float) -> tuple[mi.Float, mi.Float]:
+    """``(R, Z)`` of the profile at ``(seg, u)``, attached to ``points``
+    (a polyline's segment is ``p0 + u (p1 - p0)``; a B-spline's eq. 12)."""
+    active = mi.Bool(True)
+    if kind == "bspline":
+        controls = [_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k), active)
+                    for k in range(4)]
+        value, _ = _curve(controls, u)
+        return value.x, value.y
+    p0, delta, _ = _segment(points, index.ends, seg, active)
+    return p0.x + u * delta.x, p0.y + u * delta.y

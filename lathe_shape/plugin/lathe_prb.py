@@ -21,6 +21,14 @@
      - The eq. 11 policy where the interpolated shading normal contradicts
        the real surface, as for ``lathe_path``: ``none``, ``terminate`` or
        ``fallback`` (default).
+   * - ``silhouette``
+     - boolean
+     - Add the derivative of the lathes' moving outlines as the camera sees
+       them (edge sampling of the exact silhouette,
+       :mod:`lathe_shape.plugin.silhouette`). (Default: true)
+   * - ``silhouette_spp``
+     - integer
+     - Camera rays on each side of every outline sample. (Default: 4)
 
 Path Replay Backpropagation (Mitsuba's ``prb``: a primal pass, then a
 replay of the same paths that propagates derivatives vertex by vertex) on
@@ -37,10 +45,12 @@ differentiated as ``prb`` does. Use it through ``mi.render(scene, params,
 What is differentiated: everything that varies smoothly with the profile at
 a fixed set of visible surfaces (shading, the light's distance and angle,
 the solid-angle change of moving vertices: "interior" derivatives). Not
-included: the change of *which* surface a ray sees, at the lathe's
-silhouette and at shadow boundaries (visibility discontinuities; their
-share of the gradient is measured in the README, "Differentiable lathes"),
-and the motion of directions through Dirac-delta BSDFs (glass, mirrors),
+included in that part: the change of *which* surface a ray sees. At the
+lathe's outline as the camera sees it, that change is added by edge
+sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
+22-23); shadow boundaries and outlines seen through other surfaces are
+left out (their share is measured in the README, "Differentiable lathes"),
+as is the motion of directions through Dirac-delta BSDFs (glass, mirrors),
 which ``prb`` omits as well. Non-lathe shapes are not differentiated with
 respect to their geometry.
 
@@ -55,15 +65,21 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 from mitsuba.ad.integrators.common import RBIntegrator, mis_weight, solid_angle_to_area_jacobian
 
 from .attached_hits import attach_lathe_hits
 from .lathe_path import NORMAL_CHECKS, with_geometric_frame
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
+from .silhouette import outline_backward, outline_forward
 from .variants import register_jit_plugin
 
 __all__ = ["LathePRBIntegrator", "register"]
+
+
+def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
+    return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
 
 
 def _moving_wi(lathes, ray_prev: mi.Ray3f, si_prev: mi.SurfaceInteraction3f,
@@ -106,6 +122,10 @@ class LathePRBIntegrator(RBIntegrator):
                 f"lathe_prb: parameter 'normal_check': unknown policy '{self.normal_check}' "
                 f"(expected one of: {', '.join(NORMAL_CHECKS)})"
             )
+        self.silhouette = typed_property(props, "silhouette", bool, True, "lathe_prb")
+        self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, "lathe_prb")
+        if self.silhouette_spp < 1:
+            raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
         self._geometry = None
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
@@ -125,12 +145,22 @@ class LathePRBIntegrator(RBIntegrator):
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     def render_forward(self, scene: mi.Scene, params, sensor=0, seed=0, spp=0):
-        self.geometry(scene)
-        return super().render_forward(scene, params, sensor, seed, spp)
+        geometry = self.geometry(scene)
+        outline = None
+        if self.silhouette and geometry.lathes:
+            # Before the interior pass, which consumes the parameters' tangents
+            outline = outline_forward(self, scene, _sensor(scene, sensor), seed, self.silhouette_spp)
+        image = super().render_forward(scene, params, sensor, seed, spp)
+        if outline is not None:
+            image += mi.TensorXf(outline[..., : image.shape[2]].astype(np.float32))
+        return image
 
     def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
-        self.geometry(scene)
-        return super().render_backward(scene, params, grad_in, sensor, seed, spp)
+        geometry = self.geometry(scene)
+        super().render_backward(scene, params, grad_in, sensor, seed, spp)
+        if self.silhouette and geometry.lathes:
+            outline_backward(self, scene, _sensor(scene, sensor), np.array(grad_in), seed,
+                             self.silhouette_spp)
 
     @dr.syntax
     def sample(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
