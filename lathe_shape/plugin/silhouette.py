@@ -64,6 +64,12 @@ class OutlineSamples:
         if len(seg):
             self.parts.append((lathe, seg, u, phi, normal_dl, x))
 
+    def merged(self) -> list[tuple]:
+        """The parts concatenated per lathe (in the order first added)."""
+        lathes = list(dict.fromkeys(part[0] for part in self.parts))
+        return [(lathe, *(np.concatenate([part[k] for part in self.parts if part[0] is lathe])
+                          for k in range(1, 6))) for lathe in lathes]
+
 
 def _project(sensor: mi.Sensor, points: np.ndarray) -> np.ndarray:
     """Image positions (pixels) of world points (n, 3)."""
@@ -106,45 +112,49 @@ def _outline_azimuth(r, z, n_r, n_z, camera: np.ndarray, branch: float, clip: bo
         return phi_c + branch * np.arccos(kappa)
 
 
-def _add_pieces(out: OutlineSamples, sensor, lathe, seg, u_lo, u_hi, phi_of) -> None:
-    """Outline pieces between the material points ``(seg, u_lo, phi_of(u_lo))``
-    and ``(seg, u_hi, ...)``; the sample is the middle one. A piece whose
-    middle is on the outline keeps its ends (where the outline ends inside
-    the piece, at its nearest azimuth)."""
+def _add_pieces(out: OutlineSamples, sensor, lathe, seg, u_lo, u_hi, branch, camera) -> None:
+    """Outline pieces between the material points ``(seg, u_lo, phi(u_lo))``
+    and ``(seg, u_hi, phi(u_hi))`` of the outline branches ``branch`` (+-1);
+    the sample is the middle one. A piece whose middle is on the outline
+    keeps its ends (where the outline ends inside the piece, at its nearest
+    azimuth). One projection for all pieces."""
     points, azimuths = [], []
     for u, clip in ((u_mid := 0.5 * (u_lo + u_hi), False), (u_lo, True), (u_hi, True)):
         r, z, n_r, n_z = _curve_numpy(lathe, seg, u)
-        phi = phi_of(r, z, n_r, n_z, clip)
+        phi = _outline_azimuth(r, z, n_r, n_z, camera, branch, clip)
         points.append(_world(lathe, r, z, np.nan_to_num(phi)))
         azimuths.append(phi)
     ok = np.isfinite(azimuths[0])
     if not ok.any():
         return
-    x_mid, x_lo, x_hi = (_project(sensor, p[ok]) for p in points)
+    x_mid, x_lo, x_hi = np.split(_project(sensor, np.concatenate([p[ok] for p in points])), 3)
     step = x_hi - x_lo
     normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)  # |n| dl = |step|
     out.add(lathe, seg[ok], u_mid[ok], azimuths[0][ok], normal_dl, x_mid)
 
 
 def _segment_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
-    """The outline along every profile segment (both branches)."""
+    """The outline along every profile segment (both branches), with about
+    ``_DENSITY`` pieces per pixel of its image length."""
     n_seg = lathe.profile.segment_count
     coarse = np.linspace(0.0, 1.0, 33)
+    seg = np.repeat(np.arange(n_seg), len(coarse))
+    u = np.tile(coarse, n_seg)
+    r, z, n_r, n_z = _curve_numpy(lathe, seg, u)
+    pieces = []
     for branch in (1.0, -1.0):
-        def phi_of(r, z, n_r, n_z, clip=False, branch=branch):
-            return _outline_azimuth(r, z, n_r, n_z, camera, branch, clip)
-
-        for k in range(n_seg):
-            seg = np.full(len(coarse), k)
-            r, z, n_r, n_z = _curve_numpy(lathe, seg, coarse)
-            phi = phi_of(r, z, n_r, n_z, True)
-            if not np.isfinite(phi).any():
-                continue
-            phi = np.nan_to_num(phi)  # n_r = 0: an annulus has no outline
-            length = np.linalg.norm(np.diff(_project(sensor, _world(lathe, r, z, phi)), axis=0), axis=1).sum()
-            count = int(np.clip(np.ceil(_DENSITY * length), 8, 4096))
+        # n_r = 0 (an annulus) has no outline: NaN, counted as no length
+        phi = _outline_azimuth(r, z, n_r, n_z, camera, branch, True)
+        x = _project(sensor, _world(lathe, r, z, np.nan_to_num(phi))).reshape(n_seg, len(coarse), 2)
+        length = np.nan_to_num(np.linalg.norm(np.diff(x, axis=1), axis=2)
+                               * np.isfinite(phi.reshape(n_seg, -1))[:, 1:]).sum(axis=1)
+        for k in np.flatnonzero(length > 0):
+            count = int(np.clip(np.ceil(_DENSITY * length[k]), 8, 4096))
             edges = np.linspace(0.0, 1.0, count + 1)
-            _add_pieces(out, sensor, lathe, np.full(count, k), edges[:-1], edges[1:], phi_of)
+            pieces.append((np.full(count, k), edges[:-1], edges[1:], np.full(count, branch)))
+    if pieces:
+        seg, u_lo, u_hi, branch = (np.concatenate(column) for column in zip(*pieces, strict=True))
+        _add_pieces(out, sensor, lathe, seg, u_lo, u_hi, branch, camera)
 
 
 def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
@@ -237,7 +247,8 @@ def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, 
     positions = np.tile(positions, (spp, 1))
     count = len(positions)
     sampler = sensor.sampler().clone()
-    sampler.seed(seed, count)
+    # An opaque seed: a new seed is a new kernel input, not a recompilation
+    sampler.seed(dr.opaque(mi.UInt32, seed), count)
     pos = mi.Point2f(*(positions / [width, height]).T.astype(np.float32))
     ray, weight = sensor.sample_ray(0.0, sampler.next_1d(), pos, sampler.next_2d())
     radiance = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
@@ -263,23 +274,30 @@ def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.P
 
 
 def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int):
-    """Per outline piece: its pixel ``(row, column)``, the detached weight
-    ``(f_in - f_out) dl`` (n, channels) and the attached ``n . x``."""
-    samples = outline_samples(sensor, integrator.geometry(scene).lathes)
+    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces,
+    their detached weight ``(f_in - f_out) dl`` (n, channels) and their
+    attached ``n . x``. The radiance either side of all pieces is traced in
+    one wavefront, with a seed of its own (independent of the image's)."""
+    parts = outline_samples(sensor, integrator.geometry(scene).lathes).merged()
+    if not parts:
+        return
     width, height = sensor.film().crop_size()
-    for k, (lathe, seg, u, phi, normal_dl, x) in enumerate(samples.parts):
-        # A seed of its own per part (its rays are independent of the image's)
-        part_seed = seed + 7919 * (k + 1)
-        weight = outline_radiance_difference(scene, sensor, integrator, x, normal_dl, part_seed, spp)
-        unit = normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
-        position, points = attached_outline_positions(sensor, lathe, seg, u, phi)
-        weight *= outline_visible(integrator, scene, sensor, dr.detach(points))[:, None]
+    x = np.concatenate([part[5] for part in parts])
+    normal_dl = np.concatenate([part[4] for part in parts])
+    weight = outline_radiance_difference(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
+    positions = [attached_outline_positions(sensor, *part[:4]) for part in parts]
+    world = np.concatenate([np.array(dr.detach(points)).T for _, points in positions])
+    weight *= outline_visible(integrator, scene, sensor, mi.Point3f(*world.T.astype(np.float32)))[:, None]
+    start = 0
+    for (_, seg, _, _, part_normal_dl, part_x), (position, _) in zip(parts, positions, strict=True):
+        unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
         speed = position.x * mi.Float(unit[:, 0].astype(np.float32)) + position.y * mi.Float(
             unit[:, 1].astype(np.float32))
-        column = np.floor(x[:, 0]).astype(np.int64)
-        row = np.floor(x[:, 1]).astype(np.int64)
+        column = np.floor(part_x[:, 0]).astype(np.int64)
+        row = np.floor(part_x[:, 1]).astype(np.int64)
         inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
-        yield (row, column, inside), weight, speed
+        yield (row, column, inside), weight[start:start + len(seg)], speed
+        start += len(seg)
 
 
 def outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int) -> np.ndarray:
