@@ -9,7 +9,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["DEFAULT_PROFILE", "lathe_scene", "profile_string"]
+__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "lathe_scene", "profile_string"]
 
 #: A vase-like polyline (both ends on the axis): smooth joints on the bowl,
 #: creases at the rim of the top cap and at the foot.
@@ -34,21 +34,35 @@ def _camera(azimuth_deg: float, resolution: int, target_z: float, distance: floa
     }
 
 
+#: Camera placements ``(azimuth in degrees, height)`` of the default view.
+DEFAULT_VIEWS = ((10.0, 2.5),)
+
+#: Point light positions of the default scene.
+DEFAULT_LIGHTS = ((2.0, -2.0, 3.0),)
+
+
 def lathe_scene(profile: str | np.ndarray = DEFAULT_PROFILE, kind: str = "polyline", resolution: int = 32,
-                azimuths: tuple[float, ...] = (10.0,), integrator: str = "lathe_prb", max_depth: int = 2,
-                lathe_id: str = "lathe", offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> mi.Scene:
+                views: tuple[tuple[float, float], ...] = DEFAULT_VIEWS, integrator: str = "lathe_prb",
+                max_depth: int = 2, lathe_id: str = "lathe",
+                offset: tuple[float, float, float] = (0.0, 0.0, 0.0), reference: str = "mesh",
+                lights: tuple[tuple[float, float, float], ...] = DEFAULT_LIGHTS) -> mi.Scene:
     """A diffuse ``lathe`` (profile string or (n, 2) points, ``kind``) at
-    ``offset``, a point light, and one camera per azimuth (degrees) looking
-    at it from above (sensor ``k`` is azimuth ``k``)."""
+    ``offset``, a point light, and one camera per view ``(azimuth in
+    degrees, height)``, 3 units from the axis, looking at the point (0, 0,
+    0.6) (sensor ``k`` is view ``k``), and a point light at each of
+    ``lights``. ``reference`` is the lathe's reference parameter (``proxy``
+    when only exact integrators render it)."""
     if not isinstance(profile, str):
         profile = profile_string(profile)
     scene: dict[str, object] = {
         "type": "scene",
         "integrator": {"type": integrator, "max_depth": max_depth},
-        "light": {"type": "point", "position": [2.0, -2.0, 3.0], "intensity": {"type": "rgb", "value": 20.0}},
         lathe_id: {"type": "lathe", "profile": profile, "kind": kind, "bsdf": {"type": "diffuse"},
-                   "to_world": mi.ScalarTransform4f().translate(list(offset))},
+                   "reference": reference, "to_world": mi.ScalarTransform4f().translate(list(offset))},
     }
-    for k, azimuth in enumerate(azimuths):
-        scene[f"camera_{k}"] = _camera(azimuth, resolution, 0.6, 3.0, 2.5)
+    for k, position in enumerate(lights):
+        scene[f"light_{k}"] = {"type": "point", "position": list(position),
+                               "intensity": {"type": "rgb", "value": 20.0}}
+    for k, (azimuth, height) in enumerate(views):
+        scene[f"camera_{k}"] = _camera(azimuth, resolution, 0.6, 3.0, height)
     return mi.load_dict(scene)
