@@ -6,16 +6,11 @@
    * - Parameter
      - Type
      - Description
-   * - ``max_depth``
-     - integer
-     - Longest path depth (-1 = infinite). 1 renders only directly visible
-       emitters, 2 direct illumination, and so on. (Default: 6)
-   * - ``rr_depth``
-     - integer
-     - Path depth from which Russian roulette may stop paths. (Default: 5)
-   * - ``hide_emitters``
-     - boolean
-     - Hide directly visible emitters. (Default: false)
+   * - ``max_depth``, ``rr_depth``, ``hide_emitters``
+     - integer, integer, boolean
+     - The path's longest depth (-1 = infinite; default 6), the depth where
+       Russian roulette starts (default 5), and whether directly visible
+       emitters are hidden (default false), as for ``lathe_path``.
    * - ``normal_check``
      - string
      - The eq. 11 policy where the interpolated shading normal contradicts
@@ -108,6 +103,25 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     inv_pdf = dr.select(ds.pdf != 0, dr.rcp(ds.pdf), 0)
     em_weight = dr.replace_grad(em_weight, em_val * dr.detach(inv_pdf)) * dr.relative_grad(J)
     return ds, em_weight
+
+
+def _contradicts_outgoing(bs: mi.BSDFSample3f, wo_world: mi.Vector3f, n: mi.Normal3f, cos_in_geo: mi.Float,
+                          active: mi.Bool) -> mi.Bool:
+    """Eq. 11, outgoing side (detached): a reflected direction must stay on
+    the incident side of the real surface, a transmitted one must cross it."""
+    side = cos_in_geo * dr.dot(n, wo_world)
+    wrong_side = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection), side <= 0.0, side >= 0.0)
+    return active & (bs.pdf > 0.0) & wrong_side
+
+
+def _resample_geometric(bsdf: mi.BSDF, ctx: mi.BSDFContext, sampler: mi.Sampler, si: mi.SurfaceInteraction3f,
+                        redo: mi.Bool, drawn: tuple):
+    """The ``fallback`` policy: where ``redo``, the BSDF sample ``drawn`` =
+    (sample, weight, world direction) is drawn again in the geometric frame."""
+    si_geo = with_geometric_frame(si, redo)
+    bs_geo, weight_geo = bsdf.sample(ctx, si_geo, sampler.next_1d(), sampler.next_2d(), redo)
+    redrawn = (bs_geo, weight_geo, si_geo.to_world(bs_geo.wo))
+    return tuple(dr.select(redo, new, old) for new, old in zip(redrawn, drawn, strict=True))
 
 
 class LathePRBIntegrator(RBIntegrator):
@@ -236,17 +250,10 @@ class LathePRBIntegrator(RBIntegrator):
                                           active_next)
             wo_world = si_used.to_world(bs.wo)
             if dr.hint(check != "none", mode="scalar"):
-                # Eq. 11, outgoing side: R stays on the incident side, T crosses
-                reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
-                side = cos_in_geo * dr.dot(si_detached.n, wo_world)
-                bad_out = active_next & (bs.pdf > 0.0) & dr.select(reflected, side <= 0.0, side >= 0.0)
+                bad_out = _contradicts_outgoing(bs, wo_world, si_detached.n, cos_in_geo, active_next)
                 if dr.hint(check == "fallback", mode="scalar"):
-                    si_geo = with_geometric_frame(si_used, bad_out)
-                    bs_geo, weight_geo = bsdf.sample(bsdf_ctx, si_geo, sampler.next_1d(),
-                                                     sampler.next_2d(), bad_out)
-                    bs = dr.select(bad_out, bs_geo, bs)
-                    bsdf_weight = dr.select(bad_out, weight_geo, bsdf_weight)
-                    wo_world = dr.select(bad_out, si_geo.to_world(bs_geo.wo), wo_world)
+                    bs, bsdf_weight, wo_world = _resample_geometric(bsdf, bsdf_ctx, sampler, si_used, bad_out,
+                                                                    (bs, bsdf_weight, wo_world))
                     with dr.resume_grad(when=not primal):
                         si = with_geometric_frame(si, bad_out)
                 else:
