@@ -2,8 +2,8 @@
 
 The quick tests check the projection, the error measure and a few
 optimisation steps. The full recoveries (B-spline vase below 1% of the
-height, polyline glass) take about a minute each on a 2-core CPU and run
-when LATHE_INVERSE_TESTS=1."""
+height, polyline glass below 2%) take 30-70 s each on a shared 2-core CPU
+and run when LATHE_INVERSE_TESTS=1."""
 
 from __future__ import annotations
 
@@ -57,7 +57,8 @@ def test_few_steps_reduce_the_profile_error():
 
 @FULL
 def test_recover_bspline_vase():
-    result = recover_profile(HIDDEN_PROFILES["bspline"], "bspline", iterations=30, resolution=24, spp=8)
+    # Measured: 0.57% of the height (0.52% after 60 steps)
+    result = recover_profile(HIDDEN_PROFILES["bspline"], "bspline", iterations=40, resolution=32, spp=8)
     assert result.errors[-1] < 0.01
 
 
