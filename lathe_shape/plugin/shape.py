@@ -88,6 +88,7 @@ from ..profiles import ProfileError, parse_profile_string, read_points, read_pro
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .interaction import lathe_interaction
 from .params import check_transform, describe_lathe, transform_property, typed_property
+from .profile_param import ProfileIndex, profile_index, rebuild_surface, remember_input
 from .reference_mesh import check_mesh_budget, reference_steps
 from .variants import register_jit_plugin
 
@@ -139,7 +140,9 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
             f"{who}: parameter 'kind': unknown profile kind '{kind}' "
             f"(expected one of: {', '.join(SURFACE_KINDS)})"
         )
-    return make_surface(kind, points, sharp, labels, source, crease, smooth, open_sheet)
+    surface = make_surface(kind, points, sharp, labels, source, crease, smooth, open_sheet)
+    # Kept for the differentiable 'points' parameter (profile_param.py).
+    return remember_input(surface, points, sharp, labels, source, crease, smooth, open_sheet)
 
 
 def _option(props: mi.Properties, name: str, kind: type, declared: dict, default, who: str,
@@ -269,6 +272,57 @@ class LatheShape(mi.Mesh):
             params[keys[0]] = type(params[keys[0]])(buffers[name].ravel())
         params.update()
         self._set_transform(matrix)
+
+    # -- the profile as a differentiable parameter ---------------------------
+
+    def traverse(self, cb: mi.TraversalCallback) -> None:
+        """Mitsuba's mesh parameters, plus ``points``: the profile's points
+        as flat ``(r, z)`` pairs in the order the user gave them
+        (differentiable; see :mod:`lathe_shape.plugin.profile_param`)."""
+        super().traverse(cb)
+        if not hasattr(self, "profile_points"):
+            # First traversal (from __init__): the loaded points.
+            self.profile_points = mi.Float(self.surface.given.points.ravel().astype(np.float32))
+        cb.put("points", self.profile_points, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
+
+    def parameters_changed(self, keys: list[str]) -> None:
+        """A new ``points`` value re-validates the profile and rebuilds the
+        kernel data and the reference mesh; an invalid one raises the loading
+        error and leaves the previous profile (and parameter value) in place."""
+        if "points" in keys:
+            self._update_profile()
+        rest = [key for key in keys if key != "points"]
+        if rest or not keys:
+            super().parameters_changed(rest)
+
+    def _update_profile(self) -> None:
+        who = (f"lathe '{self.id()}'" if self.id() else "lathe") + ": parameter 'points'"
+        given = self.surface.given
+        try:
+            surface = rebuild_surface(given, self.profile_points.numpy())
+            check_mesh_budget(_ring_bound(surface), self.mesh_segments, who)
+        except ValueError:
+            # Keep the previous profile: its value goes back into the parameter.
+            previous = mi.Float(given.points.ravel().astype(np.float32))
+            mi.set_property(self.profile_points, previous)
+            raise
+        self.surface = surface
+        self.profile = surface.profile
+        self._index = None
+        self.local_mesh = surface.tessellate(self.mesh_segments)
+        params = mi.traverse(self)
+        for key, value in self._mesh_buffers(self.to_world_matrix).items():
+            params[key] = type(params[key])(value.ravel())
+        params[FACE_BAND_ATTRIBUTE] = mi.Float(self.local_mesh.face_band.astype(np.float32))
+        params.update()
+
+    @property
+    def profile_index(self) -> ProfileIndex:
+        """Index maps from the kernels' segments to ``points`` (built on
+        first use after each profile change)."""
+        if getattr(self, "_index", None) is None:
+            self._index = profile_index(self.surface)
+        return self._index
 
     # -- exact intersection -------------------------------------------------
 

@@ -71,6 +71,7 @@ def register(variant: str | None = None) -> None:
 
     register_shape()
     register_integrator()
+    __import__(f"{__package__}.lathe_prb", fromlist=["register"]).register()
 
 
 def on_variant_change(old: str | None, new: str | None) -> None:

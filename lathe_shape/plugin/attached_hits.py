@@ -1,0 +1,60 @@
+"""Surface interactions on lathes that carry derivatives with respect to the
+profile points (the ``points`` scene parameter).
+
+:class:`~lathe_shape.plugin.scene_geometry.ExactSceneGeometry` finds the hits
+detached; :func:`attach_lathe_hits` re-derives each lathe hit's distance,
+position, geometric normal and shading frame from the profile points
+(lathe_shape/kernels/attached.py, docs/method.md eqs. 21-25) and grafts
+their derivatives onto the detached values (``dr.replace_grad``), so that
+every primal value stays the exact kernel's.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..kernels.attached import AttachedHit, attached_bspline, attached_polyline
+from .shape import LatheShape
+
+__all__ = ["attach_lathe_hits", "lathe_hit"]
+
+
+def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, active: mi.Bool) -> AttachedHit:
+    """The attached local-frame hit of ``lathe`` for the detached interaction
+    ``si`` of the world-space ``ray`` (lanes ``active``)."""
+    o = lathe._to_local @ ray.o
+    d = lathe._to_local @ ray.d
+    t = dr.select(active, si.t, 0.0)
+    if lathe.surface.kind == "bspline":
+        n_seg = lathe.profile.segment_count
+        # The kernel's curve parameter, from uv.y = (seg + u) / n_seg
+        u = si.uv.y * n_seg - mi.Float(si.prim_index)
+        return attached_bspline(lathe.profile_points, lathe.profile_index, o, d, t,
+                                si.prim_index, u, active)
+    return attached_polyline(lathe.profile_points, lathe.profile_index, o, d, t,
+                             si.prim_index, lathe.smooth, active)
+
+
+def attach_lathe_hits(lathes: list[LatheShape], ray: mi.Ray3f,
+                      si: mi.SurfaceInteraction3f) -> mi.SurfaceInteraction3f:
+    """``si`` (detached, from the exact scene geometry) with ``t``, ``p``,
+    ``n``, ``sh_frame`` and ``wi`` of its lathe hits attached to the
+    profile points; other hits are returned unchanged. Call it where
+    gradients are recorded (``dr.resume_grad``)."""
+    si = mi.SurfaceInteraction3f(si)
+    for lathe in lathes:
+        mine = si.is_valid() & (si.shape == mi.ShapePtr(lathe))
+        hit = lathe_hit(lathe, ray, si, mine)
+        p = lathe._to_world @ mi.Point3f(hit.p)
+        n = dr.normalize(lathe._to_world @ mi.Normal3f(hit.n))
+        sh_n = dr.normalize(lathe._to_world @ mi.Normal3f(hit.sh_n))
+        if lathe.flip:
+            n, sh_n = -n, -sh_n
+        si.t = dr.select(mine, dr.replace_grad(si.t, hit.t), si.t)
+        si.p = dr.select(mine, dr.replace_grad(si.p, p), si.p)
+        si.n = dr.select(mine, dr.replace_grad(si.n, n), si.n)
+        frame = mi.Frame3f(dr.replace_grad(si.sh_frame.n, sh_n))
+        si.sh_frame = dr.select(mine, frame, si.sh_frame)
+        si.wi = dr.select(mine, si.to_local(-ray.d), si.wi)
+    return si

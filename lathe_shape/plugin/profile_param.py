@@ -1,0 +1,169 @@
+"""A lathe's profile as a scene parameter: ``<id>.points`` in ``mi.traverse``.
+
+The parameter is the flat ``(r, z, r, z, ...)`` array of the points exactly
+as the user gave them (polyline vertices or B-spline control points, in the
+user's order and orientation, a closed profile's repeated first point
+included). The kernels work on the validated, clockwise *canonical* profile
+(lathe_shape/profiles), which may reverse, rotate or shorten that list, so
+this module also keeps the index maps from the canonical segments back to
+the user's points: the attached hits (lathe_shape/kernels/attached.py)
+gather their coordinates through them, and the gradients land on the
+user's points.
+
+Closed profiles given in the ``last == first`` form: the canonical profile
+refers to the first point only, so the gradient of the repeated last point
+is zero; an update must keep the two equal (else it is refused as an open
+profile, like a file would be).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..profiles import ProfileError
+from ..surfaces import BSplineSurface, PolylineSurface, make_surface
+
+__all__ = ["ProfileInput", "ProfileIndex", "profile_index", "rebuild_surface", "remember_input"]
+
+
+@dataclass(frozen=True)
+class ProfileInput:
+    """What the user gave for a profile (everything but the points is kept
+    when the points are updated)."""
+
+    #: ``polyline`` or ``bspline``.
+    kind: str
+    #: (n, 2) float64 points in the user's order.
+    points: np.ndarray
+    #: (n,) bool sharp flags.
+    sharp: np.ndarray
+    #: Labels of the points for error messages.
+    labels: list[str]
+    #: The file or parameter that gave them.
+    source: str
+    crease_angle: float
+    smooth: bool
+    #: Whether the profile is an open sheet (the ``open`` parameter).
+    open_sheet: bool = False
+
+
+def remember_input(surface: PolylineSurface | BSplineSurface, points, sharp, labels, source: str,
+                   crease_angle: float, smooth: bool, open_sheet: bool = False) -> PolylineSurface | BSplineSurface:
+    """Attach the user's input to a freshly built surface (``surface.given``)
+    so that the ``points`` parameter can expose and rebuild it."""
+    surface.given = ProfileInput(surface.kind, np.array(points, dtype=np.float64).reshape(-1, 2),
+                                 np.asarray(sharp, dtype=bool).copy(), list(labels), source,
+                                 float(crease_angle), bool(smooth), bool(open_sheet))
+    return surface
+
+
+def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray) -> PolylineSurface | BSplineSurface:
+    """Validate new point coordinates (flat ``r, z`` pairs, the user's order)
+    as the profile ``given`` describes and build its surface; raises
+    :class:`ProfileError` with the same messages as loading."""
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    if flat.size != given.points.size:
+        raise ProfileError(
+            f"{given.source}: parameter 'points' needs {given.points.size} values "
+            f"({len(given.points)} (r, z) pairs, as loaded), got {flat.size}"
+        )
+    points = flat.reshape(-1, 2)
+    surface = make_surface(given.kind, points, given.sharp, given.labels, given.source,
+                           given.crease_angle, given.smooth, given.open_sheet)
+    return remember_input(surface, points, given.sharp, given.labels, given.source,
+                          given.crease_angle, given.smooth, given.open_sheet)
+
+
+@dataclass
+class ProfileIndex:
+    """Index maps from the canonical surface to the user's points (opaque
+    Dr.Jit buffers, built once per profile).
+
+    Polylines: ``ends`` holds per segment the user indices of its start and
+    end point (2 per segment); ``blend`` per segment end ``(w_own, w_nb, c_r,
+    c_z)`` and ``neighbour`` the segment averaged there: the shading normal
+    at that end is ``normalize(w_own n_seg + w_nb n_neighbour + (c_r, c_z))``
+    (eq. 10's vertex normals: an average, a crease, or the axial normal of
+    a smooth cap). B-splines: ``controls`` holds the user indices of the 4
+    control points of every segment.
+    """
+
+    ends: mi.UInt32 | None = None
+    blend: mi.Float | None = None
+    neighbour: mi.UInt32 | None = None
+    controls: mi.UInt32 | None = None
+
+
+def _user_index(user: np.ndarray, canonical: np.ndarray) -> np.ndarray:
+    """For every canonical point, the index of the first equal user point
+    (the canonical profile copies the user's coordinates bit for bit)."""
+    equal = np.all(canonical[:, None, :] == user[None, :, :], axis=2)
+    if not np.all(equal.any(axis=1)):
+        raise AssertionError("profile point not found among the given points")
+    return np.argmax(equal, axis=1)
+
+
+def _end_blend(profile, seg_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment end (start, end interleaved): ``(w_own, w_nb, c_r, c_z)``
+    and the neighbour segment, recovering which rule of
+    ``profiles.polyline._segment_end_normals`` gave each shading normal."""
+    m = len(profile.segments)
+    blend = np.zeros((m, 2, 4))
+    neighbour = np.zeros((m, 2), dtype=np.uint32)
+    for k in range(m):
+        ends = ((0, profile.normal_start, (k - 1) % m), (1, profile.normal_end, (k + 1) % m))
+        for side, normals, nb in ends:
+            target = normals[k]
+            shared = profile.segments[k, side] == profile.segments[nb, 1 - side] and m > 1
+            average = seg_n[k] + seg_n[nb]
+            if shared and np.linalg.norm(average) > 1e-12 and np.allclose(
+                    average / np.linalg.norm(average), target, atol=1e-9):
+                blend[k, side] = (1.0, 1.0, 0.0, 0.0)
+                neighbour[k, side] = nb
+            elif profile.points[profile.segments[k, side], 0] == 0.0 and target[0] == 0.0:
+                # A chain end on the axis with the axial normal (a smooth
+                # cap): fixed while the cap stays within the crease angle
+                blend[k, side] = (0.0, 0.0, target[0], target[1])
+            else:  # a crease (or a cone's tip): the segment's own normal
+                blend[k, side] = (1.0, 0.0, 0.0, 0.0)
+    return blend, neighbour
+
+
+def _bspline_controls(given: ProfileInput, profile) -> np.ndarray:
+    """(n_seg, 4) user indices of every segment's control points, built as
+    ``profiles.bspline`` builds the segments (closed: wrapped; open: ends
+    tripled), after its orientation."""
+    n = len(given.points)
+    index = np.arange(n)
+    if not np.array_equal(profile.points, given.points):
+        index = index[::-1]  # the profile was reversed to run clockwise
+    if profile.closed_loop:
+        q = index[:-1]
+        seg = q[(np.arange(len(q))[:, None] + np.arange(4)[None, :]) % len(q)]
+    else:
+        q = np.concatenate([index[:1], index[:1], index, index[-1:], index[-1:]])
+        seg = q[np.arange(len(q) - 3)[:, None] + np.arange(4)[None, :]]
+    return seg
+
+
+def profile_index(surface: PolylineSurface | BSplineSurface) -> ProfileIndex:
+    """The :class:`ProfileIndex` of a surface built with :func:`remember_input`."""
+    given = surface.given
+    profile = surface.profile
+    if surface.kind == "bspline":
+        seg = _bspline_controls(given, profile)
+        controls = mi.UInt32(seg.ravel().astype(np.uint32))
+        dr.make_opaque(controls)
+        return ProfileIndex(controls=controls)
+    user = _user_index(given.points, profile.points)
+    ends = user[profile.segments]
+    blend, neighbour = _end_blend(profile, profile.segment_normals())
+    index = ProfileIndex(ends=mi.UInt32(ends.ravel().astype(np.uint32)),
+                         blend=mi.Float(blend.ravel().astype(np.float32)),
+                         neighbour=mi.UInt32(neighbour.ravel()))
+    dr.make_opaque(index.ends, index.blend, index.neighbour)
+    return index

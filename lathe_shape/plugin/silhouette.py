@@ -1,0 +1,329 @@
+"""The silhouette term of profile gradients: edge sampling of a lathe's
+exact, analytic silhouette as seen by the camera (primary visibility).
+
+Attached hits (attached_hits.py) give the derivative of what each camera ray
+sees while it keeps seeing the same surface. Where the lathe's outline moves
+across a pixel, the pixel also gains the radiance on one side of the outline
+and loses the other's (docs/method.md, eq. 26):
+
+    dI_p = sum over outline pieces in pixel p of (f_in - f_out) (n . dx) dl,
+
+``x`` the outline's image position (pixels), ``n`` its unit image normal
+and ``dl`` the piece's image length. The outline of a lathe is known in
+closed form for a pinhole at ``c`` (local frame, eq. 27): a profile point
+``(R, Z)`` with outward normal ``(n_r, n_z)`` lies on it at the azimuths
+
+    phi = phi_c +- acos((n_r R + n_z (Z - c_z)) / (n_r rho_c)),
+
+``rho_c, phi_c`` the camera's polar coordinates; on a polyline segment the
+argument is constant (a cone's outline is two generators), on a B-spline it
+varies along the curve. A polyline's joint circles are outline too where
+the two adjacent cones face the camera differently. The outline pieces are
+material points ``(segment, u, phi)``, placed detached; their positions are
+attached to the profile points, and a tangential slide of a material point
+along the outline does not change ``n . dx``, so the point's own motion
+gives the outline's. ``f_in - f_out`` is estimated with camera rays just
+either side of the outline (an outline hidden behind other surfaces gets
+zero difference), traced with the integrator's primal ``sample``.
+Shadows and outlines seen through other surfaces (secondary visibility) are
+not included.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..kernels.attached import profile_point
+from ..profiles import bspline as bs
+from .shape import LatheShape
+
+__all__ = ["OutlineSamples", "outline_backward", "outline_forward", "outline_radiance_difference",
+           "outline_samples"]
+
+#: Offset of the two rays either side of the outline, in pixels: rays much
+#: closer graze the surface, and the kernel reports no hit for a ray that
+#: grazes a joint (kernels/polyline.py); 0.02 lost a quarter of the outline.
+_EPSILON = 0.1
+
+#: Outline samples per pixel of image length (at least 4 per piece).
+_DENSITY = 2.0
+
+
+class OutlineSamples:
+    """Outline pieces of the lathes in one view: material points ``seg``,
+    ``u``, ``phi`` and owner ``lathe`` (numpy), the detached image normal
+    ``normal`` times the image length ``dl`` (numpy, (n, 2)) and image
+    position ``x`` (numpy, (n, 2), pixels)."""
+
+    def __init__(self) -> None:
+        self.parts: list[tuple[LatheShape, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def add(self, lathe, seg, u, phi, normal_dl, x) -> None:
+        if len(seg):
+            self.parts.append((lathe, seg, u, phi, normal_dl, x))
+
+    def merged(self) -> list[tuple]:
+        """The parts concatenated per lathe (in the order first added)."""
+        lathes = list(dict.fromkeys(part[0] for part in self.parts))
+        return [(lathe, *(np.concatenate([part[k] for part in self.parts if part[0] is lathe])
+                          for k in range(1, 6))) for lathe in lathes]
+
+
+def _project(sensor: mi.Sensor, points: np.ndarray) -> np.ndarray:
+    """Image positions (pixels) of world points (n, 3)."""
+    it = dr.zeros(mi.Interaction3f, len(points))
+    it.p = mi.Point3f(*np.asarray(points, dtype=np.float32).T)
+    ds, _ = sensor.sample_direction(it, mi.Point2f(0.5))
+    return np.array(ds.uv).T.astype(np.float64)
+
+
+def _world(lathe: LatheShape, r, z, phi) -> np.ndarray:
+    """World points of local cylindrical coordinates."""
+    m = lathe.to_world_matrix
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    return local @ m[:3, :3].T + m[:3, 3]
+
+
+def _curve_numpy(lathe: LatheShape, seg: np.ndarray, u: np.ndarray):
+    """``(R, Z, n_r, n_z)`` of the canonical profile at ``(seg, u)``."""
+    if lathe.surface.kind == "bspline":
+        controls = lathe.profile.segment_controls
+        r, z = bs.evaluate(controls, seg, u)
+        dr_, dz_ = bs.derivative(controls, seg, u)
+    else:
+        p0, p1 = lathe.profile.segment_points()
+        r = p0[seg, 0] + u * (p1[seg, 0] - p0[seg, 0])
+        z = p0[seg, 1] + u * (p1[seg, 1] - p0[seg, 1])
+        dr_, dz_ = p1[seg, 0] - p0[seg, 0], p1[seg, 1] - p0[seg, 1]
+    length = np.maximum(np.hypot(dr_, dz_), 1e-300)
+    return r, z, -dz_ / length, dr_ / length
+
+
+def _outline_azimuth(r, z, n_r, n_z, camera: np.ndarray, branch: float, clip: bool = False):
+    """Eq. 27: azimuth of the outline at profile points (NaN where none;
+    with ``clip``, the nearest azimuth where the argument leaves [-1, 1])."""
+    rho_c = np.hypot(camera[0], camera[1])
+    phi_c = np.arctan2(camera[1], camera[0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = (n_r * r + n_z * (z - camera[2])) / (n_r * rho_c)
+        kappa = np.clip(kappa, -1.0, 1.0) if clip else np.where(np.abs(kappa) < 1.0, kappa, np.nan)
+        return phi_c + branch * np.arccos(kappa)
+
+
+def _add_pieces(out: OutlineSamples, sensor, lathe, seg, u_lo, u_hi, branch, camera) -> None:
+    """Outline pieces between the material points ``(seg, u_lo, phi(u_lo))``
+    and ``(seg, u_hi, phi(u_hi))`` of the outline branches ``branch`` (+-1);
+    the sample is the middle one. A piece whose middle is on the outline
+    keeps its ends (where the outline ends inside the piece, at its nearest
+    azimuth). One projection for all pieces."""
+    points, azimuths = [], []
+    for u, clip in ((u_mid := 0.5 * (u_lo + u_hi), False), (u_lo, True), (u_hi, True)):
+        r, z, n_r, n_z = _curve_numpy(lathe, seg, u)
+        phi = _outline_azimuth(r, z, n_r, n_z, camera, branch, clip)
+        points.append(_world(lathe, r, z, np.nan_to_num(phi)))
+        azimuths.append(phi)
+    ok = np.isfinite(azimuths[0])
+    if not ok.any():
+        return
+    x_mid, x_lo, x_hi = np.split(_project(sensor, np.concatenate([p[ok] for p in points])), 3)
+    step = x_hi - x_lo
+    normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)  # |n| dl = |step|
+    out.add(lathe, seg[ok], u_mid[ok], azimuths[0][ok], normal_dl, x_mid)
+
+
+def _segment_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
+    """The outline along every profile segment (both branches), with about
+    ``_DENSITY`` pieces per pixel of its image length."""
+    n_seg = lathe.profile.segment_count
+    coarse = np.linspace(0.0, 1.0, 33)
+    seg = np.repeat(np.arange(n_seg), len(coarse))
+    u = np.tile(coarse, n_seg)
+    r, z, n_r, n_z = _curve_numpy(lathe, seg, u)
+    pieces = []
+    for branch in (1.0, -1.0):
+        # n_r = 0 (an annulus) has no outline: NaN, counted as no length
+        phi = _outline_azimuth(r, z, n_r, n_z, camera, branch, True)
+        x = _project(sensor, _world(lathe, r, z, np.nan_to_num(phi))).reshape(n_seg, len(coarse), 2)
+        length = np.nan_to_num(np.linalg.norm(np.diff(x, axis=1), axis=2)
+                               * np.isfinite(phi.reshape(n_seg, -1))[:, 1:]).sum(axis=1)
+        for k in np.flatnonzero(length > 0):
+            count = int(np.clip(np.ceil(_DENSITY * length[k]), 8, 4096))
+            edges = np.linspace(0.0, 1.0, count + 1)
+            pieces.append((np.full(count, k), edges[:-1], edges[1:], np.full(count, branch)))
+    if pieces:
+        seg, u_lo, u_hi, branch = (np.concatenate(column) for column in zip(*pieces, strict=True))
+        _add_pieces(out, sensor, lathe, seg, u_lo, u_hi, branch, camera)
+
+
+def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
+                 camera: np.ndarray) -> list[tuple[float, float]]:
+    """Azimuth intervals of the joint circle ``(r, z)`` where the two cones
+    of ``normals`` face the camera differently: between consecutive roots
+    of eq. 27 for either cone (the ends of their outline generators)."""
+    roots = [0.0, 2 * np.pi]
+    for n in normals:
+        for branch in (1.0, -1.0):
+            phi = _outline_azimuth(np.array([r]), np.array([z]), n[0], n[1], camera, branch)[0]
+            if np.isfinite(phi):
+                roots.append(float(np.mod(phi, 2 * np.pi)))
+    roots = sorted(roots)
+    arcs = []
+    for lo, hi in zip(roots[:-1], roots[1:], strict=True):
+        mid = 0.5 * (lo + hi)
+        to_camera = camera - np.array([r * np.cos(mid), r * np.sin(mid), z])
+        sides = [np.dot([n[0] * np.cos(mid), n[0] * np.sin(mid), n[1]], to_camera) > 0 for n in normals]
+        if hi > lo and sides[0] != sides[1]:
+            arcs.append((lo, hi))
+    return arcs
+
+
+def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
+    """Polylines: the arcs of the joint circles between two cones that face
+    the camera differently (one front-, one back-facing)."""
+    profile = lathe.profile
+    _, p1 = profile.segment_points()
+    normals = profile.segment_normals()
+    m = profile.segment_count
+    for k in range(m):
+        j = (k + 1) % m
+        if profile.segments[k, 1] != profile.segments[j, 0] or (j == 0 and not profile.closed_loop):
+            continue
+        r, z = p1[k]
+        if r <= 0.0:
+            continue
+        for lo, hi in _facing_arcs(r, z, [normals[k], normals[j]], camera):
+            count = int(np.clip(np.ceil(_DENSITY * (hi - lo) * r * size), 2, 8192))
+            edges = np.linspace(lo, hi, count + 1)
+            phi = 0.5 * (edges[:-1] + edges[1:])
+            ring = np.full(count, r), np.full(count, z)
+            x_lo, x_hi, x_mid = (_project(sensor, _world(lathe, *ring, a))
+                                 for a in (edges[:-1], edges[1:], phi))
+            step = x_hi - x_lo
+            normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
+            out.add(lathe, np.full(count, k), np.ones(count), phi, normal_dl, x_mid)
+
+
+def outline_samples(sensor: mi.Sensor, lathes: list[LatheShape]) -> OutlineSamples:
+    """The outline pieces of ``lathes`` seen by the perspective ``sensor``."""
+    out = OutlineSamples()
+    origin = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0.0), dtype=np.float64).ravel()
+    width, height = sensor.film().crop_size()
+    for lathe in lathes:
+        camera = np.linalg.inv(lathe.to_world_matrix) @ np.append(origin, 1.0)
+        # Pixels per unit of length near the lathe (for the sample counts)
+        center = lathe.to_world_matrix[:3, 3]
+        size = max(width, height) / max(np.linalg.norm(origin - center), 1e-6)
+        _segment_outlines(out, sensor, lathe, camera[:3], size)
+        if lathe.surface.kind == "polyline":
+            _joint_outlines(out, sensor, lathe, camera[:3], size)
+    return out
+
+
+def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
+                               phi) -> tuple[mi.Point2f, mi.Point3f]:
+    """Image positions and world points of the material points, attached to
+    the profile."""
+    r, z = profile_point(lathe.profile_points, lathe.profile_index, lathe.surface.kind,
+                         mi.UInt32(seg.astype(np.uint32)), mi.Float(u.astype(np.float32)))
+    phi = mi.Float(phi.astype(np.float32))
+    local = mi.Point3f(r * dr.cos(phi), r * dr.sin(phi), z)
+    it = dr.zeros(mi.Interaction3f, len(seg))
+    it.p = lathe._to_world @ local
+    ds, _ = sensor.sample_direction(it, mi.Point2f(0.5))
+    return ds.uv, it.p
+
+
+def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray,
+                                normal_dl: np.ndarray, seed: int, spp: int) -> np.ndarray:
+    """``(f(x - eps n) - f(x + eps n)) dl`` (the side the outward normal
+    points away from first), (n, channels): the integrator's primal
+    radiance of camera rays at both sides, averaged over ``spp`` samples."""
+    width, height = sensor.film().crop_size()
+    length = np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    offset = _EPSILON * normal_dl / length
+    positions = np.concatenate([x - offset, x + offset])
+    positions = np.tile(positions, (spp, 1))
+    count = len(positions)
+    sampler = sensor.sampler().clone()
+    # An opaque seed: a new seed is a new kernel input, not a recompilation
+    sampler.seed(dr.opaque(mi.UInt32, seed), count)
+    pos = mi.Point2f(*(positions / [width, height]).T.astype(np.float32))
+    ray, weight = sensor.sample_ray(0.0, sampler.next_1d(), pos, sampler.next_2d())
+    radiance = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
+                                 depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
+                                 active=mi.Bool(True))[0]
+    values = np.array(weight * radiance).T.reshape(spp, 2, len(x), -1).mean(axis=0)
+    return (values[0] - values[1]) * length
+
+
+def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.Point3f) -> np.ndarray:
+    """Whether the camera sees the outline points (world, detached):
+    nothing hit on the way there. Hidden outline pieces (the far side of the
+    lathe, or behind other shapes) move no visible edge; their difference
+    either side would only pick up the shading gradient of what hides
+    them."""
+    origin = sensor.world_transform() @ mi.Point3f(0.0)
+    to_point = points - origin
+    distance = dr.norm(to_point)
+    ray = mi.Ray3f(origin, to_point / distance)
+    # A ray to a tangent point may graze the surface just before it
+    ray.maxt = distance * 0.99
+    return ~np.array(integrator.geometry(scene).ray_test(ray, mi.Bool(True)))
+
+
+def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int):
+    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces,
+    their detached weight ``(f_in - f_out) dl`` (n, channels) and their
+    attached ``n . x``. The radiance either side of all pieces is traced in
+    one wavefront, with a seed of its own (independent of the image's)."""
+    parts = outline_samples(sensor, integrator.geometry(scene).lathes).merged()
+    if not parts:
+        return
+    width, height = sensor.film().crop_size()
+    x = np.concatenate([part[5] for part in parts])
+    normal_dl = np.concatenate([part[4] for part in parts])
+    weight = outline_radiance_difference(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
+    positions = [attached_outline_positions(sensor, *part[:4]) for part in parts]
+    world = np.concatenate([np.array(dr.detach(points)).T for _, points in positions])
+    weight *= outline_visible(integrator, scene, sensor, mi.Point3f(*world.T.astype(np.float32)))[:, None]
+    start = 0
+    for (_, seg, _, _, part_normal_dl, part_x), (position, _) in zip(parts, positions, strict=True):
+        unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
+        speed = position.x * mi.Float(unit[:, 0].astype(np.float32)) + position.y * mi.Float(
+            unit[:, 1].astype(np.float32))
+        column = np.floor(part_x[:, 0]).astype(np.int64)
+        row = np.floor(part_x[:, 1]).astype(np.int64)
+        inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+        yield (row, column, inside), weight[start:start + len(seg)], speed
+        start += len(seg)
+
+
+def outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int) -> np.ndarray:
+    """Forward mode: the outline part of the gradient image (height, width,
+    channels) for the tangents set on the lathes' ``points``."""
+    width, height = sensor.film().crop_size()
+    image = None
+    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
+        if image is None:
+            image = np.zeros((height, width, weight.shape[1]))
+        if not dr.grad_enabled(speed):
+            continue
+        tangent = np.array(dr.forward_to(speed, flags=dr.ADFlag.ClearEdges | dr.ADFlag.ClearInterior))
+        np.add.at(image, (row[inside], column[inside]), weight[inside] * tangent[inside, None])
+    return np.zeros((height, width, 3)) if image is None else image
+
+
+def outline_backward(integrator, scene: mi.Scene, sensor: mi.Sensor, grad_in: np.ndarray, seed: int,
+                     spp: int) -> None:
+    """Reverse mode: accumulate the outline part of the gradient of
+    ``sum(grad_in * image)`` into the lathes' ``points``."""
+    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
+        if not dr.grad_enabled(speed):
+            continue
+        channels = min(weight.shape[1], grad_in.shape[2])
+        adjoint = np.zeros(len(weight))
+        adjoint[inside] = np.sum(grad_in[row[inside], column[inside], :channels] * weight[inside, :channels],
+                                 axis=1)
+        dr.backward(dr.sum(speed * mi.Float(adjoint.astype(np.float32))))

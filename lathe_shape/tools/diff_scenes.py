@@ -1,0 +1,68 @@
+"""Small scenes for differentiable rendering of one lathe: a diffuse lathe
+lit by a point light, seen by perspective cameras around it (the gradient
+checks, the gradient benchmark and the inverse design use them)."""
+
+from __future__ import annotations
+
+import math
+
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "lathe_scene", "profile_string"]
+
+#: A vase-like polyline (both ends on the axis): smooth joints on the bowl,
+#: creases at the rim of the top cap and at the foot.
+DEFAULT_PROFILE = "0 0, 0.6 0, 0.7 0.35, 0.72 0.7, 0.6 1.0, 0.4 1.2, 0 1.2"
+
+
+def profile_string(points: np.ndarray) -> str:
+    """``"r z, r z, ..."`` of (n, 2) points (the ``profile`` parameter)."""
+    return ", ".join(f"{r:.9g} {z:.9g}" for r, z in np.asarray(points, dtype=np.float64).reshape(-1, 2))
+
+
+def _camera(azimuth_deg: float, resolution: int, target_z: float, distance: float, height: float) -> dict:
+    phi = math.radians(azimuth_deg)
+    origin = [distance * math.cos(phi), distance * math.sin(phi), height]
+    return {
+        "type": "perspective",
+        "fov": 35,
+        "to_world": mi.ScalarTransform4f().look_at(origin, [0, 0, target_z], [0, 0, 1]),
+        "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                 "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent", "sample_count": 4},
+    }
+
+
+#: Camera placements ``(azimuth in degrees, height)`` of the default view.
+DEFAULT_VIEWS = ((10.0, 2.5),)
+
+#: Point light positions of the default scene.
+DEFAULT_LIGHTS = ((2.0, -2.0, 3.0),)
+
+
+def lathe_scene(profile: str | np.ndarray = DEFAULT_PROFILE, kind: str = "polyline", resolution: int = 32,
+                views: tuple[tuple[float, float], ...] = DEFAULT_VIEWS, integrator: str = "lathe_prb",
+                max_depth: int = 2, lathe_id: str = "lathe",
+                offset: tuple[float, float, float] = (0.0, 0.0, 0.0), reference: str = "mesh",
+                lights: tuple[tuple[float, float, float], ...] = DEFAULT_LIGHTS) -> mi.Scene:
+    """A diffuse ``lathe`` (profile string or (n, 2) points, ``kind``) at
+    ``offset``, a point light, and one camera per view ``(azimuth in
+    degrees, height)``, 3 units from the axis, looking at the point (0, 0,
+    0.6) (sensor ``k`` is view ``k``), and a point light at each of
+    ``lights``. ``reference`` is the lathe's reference parameter (``proxy``
+    when only exact integrators render it)."""
+    if not isinstance(profile, str):
+        profile = profile_string(profile)
+    scene: dict[str, object] = {
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": max_depth},
+        lathe_id: {"type": "lathe", "profile": profile, "kind": kind, "bsdf": {"type": "diffuse"},
+                   "reference": reference, "to_world": mi.ScalarTransform4f().translate(list(offset))},
+    }
+    for k, position in enumerate(lights):
+        scene[f"light_{k}"] = {"type": "point", "position": list(position),
+                               "intensity": {"type": "rgb", "value": 20.0}}
+    for k, (azimuth, height) in enumerate(views):
+        scene[f"camera_{k}"] = _camera(azimuth, resolution, 0.6, 3.0, height)
+    return mi.load_dict(scene)
