@@ -145,3 +145,22 @@ def test_silhouette_term_is_needed():
     check = check_gradient(scene, scene_lathes(scene)[0], CASES["bowl"], h=1e-2, spp=256, seed=3)
     assert abs(check.fd_silhouette) > 0.5 * abs(check.fd_total)
     assert abs(check.ad_silhouette - check.fd_silhouette) > 0.5 * abs(check.fd_silhouette)
+
+
+def test_curve_kinds_without_point_gradients():
+    # A sor lathe renders with lathe_prb; asking for its points' gradient is
+    # refused with the kinds that support it.
+    profile = "0.5 -0.1, 0.5 0, 0.6 0.4, 0.4 0.8, 0.3 1.2, 0.3 1.3"
+    scene = lathe_scene(profile, kind="sor", resolution=8)
+    image = mi.render(scene, spp=2)
+    assert np.isfinite(np.array(image)).all() and np.array(image).mean() > 0.0
+    params, key = _points_params(scene)
+    dr.enable_grad(params[key])
+    params.update()
+    with pytest.raises(Exception) as error:  # noqa: PT011 (Dr.Jit wraps it; the cause is checked)
+        mi.render(scene, params, spp=2)
+    causes = [error.value]
+    while causes[-1].__cause__ is not None:
+        causes.append(causes[-1].__cause__)
+    expected = "'points' are available for the kinds polyline and bspline, not 'sor'"
+    assert any(expected in str(e) for e in causes), causes

@@ -17,7 +17,10 @@ import mitsuba as mi
 from ..kernels.attached import AttachedHit, attached_bspline, attached_polyline
 from .shape import LatheShape
 
-__all__ = ["attach_lathe_hits", "lathe_hit"]
+__all__ = ["DIFFERENTIABLE_KINDS", "attach_lathe_hits", "differentiable_lathes", "lathe_hit"]
+
+#: Profile kinds whose hits are attached to their points.
+DIFFERENTIABLE_KINDS = ("polyline", "bspline")
 
 
 def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, active: mi.Bool) -> AttachedHit:
@@ -36,6 +39,21 @@ def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, act
                              si.prim_index, lathe.smooth, active)
 
 
+def differentiable_lathes(lathes: list[LatheShape]) -> list[LatheShape]:
+    """The lathes whose hits and outlines follow their ``points`` (kinds
+    :data:`DIFFERENTIABLE_KINDS`). The other kinds' hits depend on no
+    differentiated parameter; a gradient asked of their points is refused."""
+    for lathe in lathes:
+        with dr.resume_grad():  # mi.render's primal pass suspends gradients
+            asked = dr.grad_enabled(lathe.profile_points)
+        if lathe.surface.kind not in DIFFERENTIABLE_KINDS and asked:
+            raise ValueError(
+                f"lathe '{lathe.id()}': gradients with respect to parameter 'points' are available "
+                f"for the kinds {' and '.join(DIFFERENTIABLE_KINDS)}, not '{lathe.surface.kind}'"
+            )
+    return [lathe for lathe in lathes if lathe.surface.kind in DIFFERENTIABLE_KINDS]
+
+
 def attach_lathe_hits(lathes: list[LatheShape], ray: mi.Ray3f,
                       si: mi.SurfaceInteraction3f) -> mi.SurfaceInteraction3f:
     """``si`` (detached, from the exact scene geometry) with ``t``, ``p``,
@@ -43,7 +61,7 @@ def attach_lathe_hits(lathes: list[LatheShape], ray: mi.Ray3f,
     profile points; other hits are returned unchanged. Call it where
     gradients are recorded (``dr.resume_grad``)."""
     si = mi.SurfaceInteraction3f(si)
-    for lathe in lathes:
+    for lathe in differentiable_lathes(lathes):
         mine = si.is_valid() & (si.shape == mi.ShapePtr(lathe))
         hit = lathe_hit(lathe, ray, si, mine)
         p = lathe._to_world @ mi.Point3f(hit.p)

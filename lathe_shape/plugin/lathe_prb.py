@@ -63,7 +63,7 @@ import mitsuba as mi
 import numpy as np
 from mitsuba.ad.integrators.common import RBIntegrator, mis_weight, solid_angle_to_area_jacobian
 
-from .attached_hits import attach_lathe_hits
+from .attached_hits import attach_lathe_hits, differentiable_lathes
 from .lathe_path import NORMAL_CHECKS, with_geometric_frame
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
@@ -147,7 +147,7 @@ class LathePRBIntegrator(RBIntegrator):
         shapes stay the same, as ``lathe_path`` keeps them)."""
         current = ExactSceneGeometry.for_scene(scene, self._geometry)
         self._geometry = current if current.lathes else None
-        for lathe in current.lathes:
+        for lathe in differentiable_lathes(current.lathes):
             # Index maps built here, outside the traced loop (no new
             # buffers inside it)
             lathe.profile_index  # noqa: B018

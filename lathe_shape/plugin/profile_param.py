@@ -52,7 +52,8 @@ class ProfileInput:
 
 
 def remember_input(surface: PolylineSurface | BSplineSurface, points, sharp, labels, source: str,
-                   crease_angle: float, smooth: bool, open_sheet: bool = False) -> PolylineSurface | BSplineSurface:
+                   crease_angle: float, smooth: bool,
+                   open_sheet: bool = False) -> PolylineSurface | BSplineSurface:
     """Attach the user's input to a freshly built surface (``surface.given``)
     so that the ``points`` parameter can expose and rebuild it."""
     surface.given = ProfileInput(surface.kind, np.array(points, dtype=np.float64).reshape(-1, 2),
@@ -101,10 +102,13 @@ class ProfileIndex:
 def _user_index(user: np.ndarray, canonical: np.ndarray) -> np.ndarray:
     """For every canonical point, the index of the first equal user point
     (the canonical profile copies the user's coordinates bit for bit)."""
-    equal = np.all(canonical[:, None, :] == user[None, :, :], axis=2)
-    if not np.all(equal.any(axis=1)):
-        raise AssertionError("profile point not found among the given points")
-    return np.argmax(equal, axis=1)
+    first: dict[tuple[float, float], int] = {}
+    for k, point in enumerate(map(tuple, user.tolist())):
+        first.setdefault(point, k)
+    try:
+        return np.array([first[point] for point in map(tuple, canonical.tolist())], dtype=np.int64)
+    except KeyError:
+        raise AssertionError("profile point not found among the given points") from None
 
 
 def _end_blend(profile, seg_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

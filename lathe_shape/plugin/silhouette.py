@@ -37,6 +37,7 @@ import numpy as np
 
 from ..kernels.attached import profile_point
 from ..profiles import bspline as bs
+from .attached_hits import differentiable_lathes
 from .shape import LatheShape
 
 __all__ = ["OutlineSamples", "outline_backward", "outline_forward", "outline_radiance_difference",
@@ -278,7 +279,7 @@ def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, sp
     their detached weight ``(f_in - f_out) dl`` (n, channels) and their
     attached ``n . x``. The radiance either side of all pieces is traced in
     one wavefront, with a seed of its own (independent of the image's)."""
-    parts = outline_samples(sensor, integrator.geometry(scene).lathes).merged()
+    parts = outline_samples(sensor, differentiable_lathes(integrator.geometry(scene).lathes)).merged()
     if not parts:
         return
     width, height = sensor.film().crop_size()
