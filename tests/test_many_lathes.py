@@ -7,6 +7,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import pytest
 
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
 from lathe_shape.plugin.shape import LatheShape
@@ -163,3 +164,28 @@ def test_moving_a_lathe_moves_its_hits_without_recompiling():
     moved[:3, 3] += [0.0, 1000.0, 0.0]
     lathe.set_to_world(moved, scene)
     assert geometry.ray_intersect(ray, mi.Bool(True)).shape != mi.ShapePtr(lathe)
+
+
+def test_new_points_rebuild_the_set():
+    # Two equal polyline cylinders side by side form one set; widening the
+    # first through its 'points' parameter moves its hits at the next query.
+    cylinder = "0 0, 1 0, 1 2, 0 2"
+    scene = mi.load_dict({
+        "type": "scene",
+        "a": {"type": "lathe", "profile": cylinder, "reference": "proxy"},
+        "b": {"type": "lathe", "profile": cylinder, "reference": "proxy",
+              "to_world": mi.ScalarTransform4f().translate([10.0, 0.0, 0.0])},
+    })
+    integrator = mi.load_dict({"type": "lathe_path"})
+    geometry = integrator.geometry(scene)
+    assert len(geometry.groups) == 1
+    ray = mi.Ray3f(mi.Point3f(-5.0, 0.0, 1.0), mi.Vector3f(1.0, 0.0, 0.0))
+    assert geometry.ray_intersect(ray, mi.Bool(True)).t[0] == pytest.approx(4.0, rel=1e-5)
+    params = mi.traverse(scene)
+    params["a.points"] = mi.Float([0, 0, 2, 0, 2, 2, 0, 2])
+    params.update()
+    assert integrator.geometry(scene) is geometry
+    assert geometry.ray_intersect(ray, mi.Bool(True)).t[0] == pytest.approx(3.0, rel=1e-5)
+    # The other lathe keeps its profile.
+    ray.o = mi.Point3f(5.0, 0.0, 1.0)
+    assert geometry.ray_intersect(ray, mi.Bool(True)).t[0] == pytest.approx(4.0, rel=1e-5)

@@ -198,6 +198,11 @@ class LatheGroup:
 
     def __init__(self, lathes: list[LatheShape]) -> None:
         self.lathes = lathes
+        self._build()
+
+    def _build(self) -> None:
+        """The profile table, transforms and top-level BVH of the lathes."""
+        lathes = self.lathes
         profiles: dict[tuple, int] = {}
         first: list[LatheShape] = []  # the first lathe of each distinct profile
         profile_of = []
@@ -210,6 +215,9 @@ class LatheGroup:
         table = ProfileTable(lathes[0].surface.kind, [lathe.surface.data for lathe in first],
                              [lathe.surface.smooth for lathe in first])
         self._matrices = [lathe.to_world_matrix for lathe in lathes]
+        # The surfaces the profile table was built from (a new 'points'
+        # value gives a lathe a new surface).
+        self._surfaces = [lathe.surface for lathe in lathes]
         #: The lathes' kernels: profiles, transforms, top-level BVH.
         self.set = LatheSet(table, profile_of, np.stack(self._matrices))
         self.shapes = mi.ShapePtr(lathes)
@@ -218,7 +226,11 @@ class LatheGroup:
 
     def follow_moves(self) -> None:
         """Rebuild the transforms and the top-level BVH when a lathe moved
-        (``set_to_world`` gives it a new matrix object)."""
+        (``set_to_world`` gives it a new matrix object), and everything
+        when a lathe's profile changed (its ``points`` parameter)."""
+        if any(lathe.surface is not old for lathe, old in zip(self.lathes, self._surfaces, strict=True)):
+            self._build()
+            return
         matrices = [lathe.to_world_matrix for lathe in self.lathes]
         if any(new is not old for new, old in zip(matrices, self._matrices, strict=True)):
             self.set.set_transforms(np.stack(matrices))
