@@ -39,11 +39,12 @@ def compare(args: argparse.Namespace) -> int:
     grid = aa_grid(args.spp or 16)
     write_images(os.path.join(out, "povray"), result.povray)
     write_images(os.path.join(out, "lathe_whitted"), result.whitted)
-    write_sheet(os.path.join(out, "sheet.png"), [("POV-Ray 3.7", result.povray), ("lathe_whitted", result.whitted)],
-                (0.3, 0.2, 0.7, 0.6))
+    tiles = [("POV-Ray 3.7", result.povray), ("lathe_whitted", result.whitted)]
+    write_sheet(os.path.join(out, "sheet.png"), tiles, (0.3, 0.2, 0.7, 0.6))
     errors = result.errors
-    print(f"{args.scene}: {result.povray.shape[1]}x{result.povray.shape[0]}, {grid}x{grid} samples per pixel, "
-          f"{os.cpu_count()} threads; wrote {out}")
+    height, width = result.povray.shape[:2]
+    print(f"{args.scene}: {width}x{height}, {grid}x{grid} samples per pixel, {os.cpu_count()} threads; "
+          f"wrote {out}")
     print(f"difference: rel. MAE {errors['rel_mae']:.4f}, rel. RMSE {errors['rel_rmse']:.4f}, "
           f"bias {errors['bias']:+.4f}")
     print(result.summary())

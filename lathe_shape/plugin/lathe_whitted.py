@@ -284,7 +284,8 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                       label="lathe_whitted_lights"):
             emitter = dr.gather(mi.EmitterPtr, emitters, index, active)
             ds, emitter_weight = emitter.sample_direction(si, sampler.next_2d(), active)
-            lit = active & (ds.pdf != 0.0)
+            # (A black emitter, e.g. a sky of radiance 0, costs no shadow ray.)
+            lit = active & (ds.pdf != 0.0) & (dr.max(emitter_weight) > 0.0)
             if dr.hint(self.normal_check != "none", mode="scalar"):
                 # Eq. 11 for the light direction, as in lathe_path.
                 side_geo = dr.dot(si.n, ds.d) * cos_in_geo

@@ -77,7 +77,8 @@ def bezier_evaluate(bezier: np.ndarray, segment: np.ndarray, t: np.ndarray) -> n
     b = np.asarray(bezier, dtype=np.float64)[np.asarray(segment)]
     t = np.asarray(t, dtype=np.float64)[..., None]
     s = 1.0 - t
-    return s**3 * b[..., 0, :] + 3 * s * s * t * b[..., 1, :] + 3 * s * t * t * b[..., 2, :] + t**3 * b[..., 3, :]
+    weights = (s**3, 3 * s * s * t, 3 * s * t * t, t**3)
+    return sum(w * b[..., k, :] for k, w in enumerate(weights))
 
 
 def vec(values) -> str:
