@@ -175,16 +175,10 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     @dr.syntax
-    def sample(
-        self,
-        scene: mi.Scene,
-        sampler: mi.Sampler,
-        ray: mi.RayDifferential3f,
-        medium: mi.Medium = None,
-        active: mi.Bool = True,
-    ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium = None,
+               active: mi.Bool = True) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
         geometry = self.geometry(scene)
-        check = self.normal_check
 
         ray = mi.Ray3f(ray)                  # Ray of the branch being traced
         weight = mi.Spectrum(1.0)            # Its throughput (Fresnel and BSDF weights so far)
@@ -205,13 +199,7 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             L += dr.select(active, weight * si.emitter(scene).eval(si, active), 0.0)
             vertex = active & valid & (depth + 1 < self.max_depth)
 
-            # -------- Eq. 11, incident side: I . N* must agree with I . N --------
-            cos_in_geo = dr.dot(si.n, -ray.d)
-            bad_in = vertex & (cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0)
-            if dr.hint(check == "terminate", mode="scalar"):
-                vertex &= ~bad_in
-            elif dr.hint(check == "fallback", mode="scalar"):
-                si = with_geometric_frame(si, bad_in)
+            si, vertex, cos_in_geo = self.incident_check(si, ray, vertex)
             bsdf = si.bsdf(ray)
 
             # ------------- Direct light at diffuse and glossy lobes -------------
@@ -242,6 +230,19 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             active = follow | pop
 
         return L, valid_ray, []
+
+    def incident_check(self, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
+                       vertex: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Bool, mi.Float]:
+        """Eq. 11 on the incident side (I . N* must agree with I . N) under
+        ``normal_check``: the vertex stops (``terminate``) or takes the
+        geometric frame (``fallback``). Returns (si, vertex, cos_in_geo)."""
+        cos_in_geo = dr.dot(si.n, -ray.d)
+        contradicts = vertex & (cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0)
+        if self.normal_check == "terminate":
+            vertex = vertex & ~contradicts
+        elif self.normal_check == "fallback":
+            si = with_geometric_frame(si, contradicts)
+        return si, vertex, cos_in_geo
 
     def specular_branch(self, bsdf: mi.BSDF, si: mi.SurfaceInteraction3f, lobe: mi.BSDFFlags,
                         cos_in_geo: mi.Float, active: mi.Bool) -> tuple[mi.Vector3f, mi.Spectrum, mi.Bool]:
