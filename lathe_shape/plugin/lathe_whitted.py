@@ -23,8 +23,9 @@
        dielectrics do for emitter samples. ``filtered``: light reaches a
        point through dielectrics (and thin dielectrics) in a straight line,
        attenuated at every crossing by the surface's transmittance (the
-       Fresnel transmittance times ``specular_transmittance``), without
-       refraction, as POV-Ray's shadows through transparent objects.
+       Fresnel transmittance from the outside at that angle, times
+       ``specular_transmittance``), without refraction, as POV-Ray's shadows
+       through transparent objects.
    * - ``normal_check``
      - string
      - What to do where the interpolated shading normal contradicts the real
@@ -311,8 +312,9 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                             target: mi.Point3f, active: mi.Bool) -> mi.Spectrum:
         """Transmittance of the straight segment from ``si`` to ``target``
         (``shadows`` = ``filtered``): the product of the delta (or null)
-        transmission weights of the surfaces crossed, in importance mode so
-        that no 1/eta^2 radiance scaling enters; 0 behind any other surface."""
+        transmission weights of the surfaces crossed, each taken for light
+        arriving from the outside at that angle, in importance mode so that
+        no 1/eta^2 radiance scaling enters; 0 behind any other surface."""
         ctx = lobe_context(TRANSMISSION, mi.TransportMode.Importance)
         origin = mi.Interaction3f(si)        # Where the segment starts (last surface crossed)
         transmittance = mi.Spectrum(1.0)     # Product of the crossings' transmittances
@@ -325,6 +327,11 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             segment.maxt = distance * (1.0 - mi.math.ShadowEpsilon)
             hit = geometry.ray_intersect(segment, active)
             active &= hit.is_valid()
+            # The transmittance of light arriving from outside at this angle,
+            # also where the segment leaves the glass: it is not refracted,
+            # so total internal reflection on the way out would be an
+            # artifact of the straight line.
+            hit.wi = mi.Vector3f(hit.wi.x, hit.wi.y, dr.abs(hit.wi.z))
             bs, crossing = hit.bsdf(segment).sample(ctx, hit, 0.5, mi.Point2f(0.5), active)
             transmittance[active] *= dr.select(bs.pdf > 0.0, crossing, 0.0)
             crossings[active] += 1
