@@ -30,13 +30,17 @@ def compare(args: argparse.Namespace) -> int:
     from lathe_shape.tools.images import write_images
     from lathe_shape.tools.paper import write_sheet
     from lathe_shape.tools.povray_compare import aa_grid, compare_scene
+    from lathe_shape.tools.povray_export import PovExportError
 
     cli.check_render_options(args)
     cli.check_at_least("--max-depth", args.max_depth, 1)
     scene = cli.open_scene(args.scene, args.variant, args.defines, args.resolution)
     out = cli.output_folder(args.output)
-    result = compare_scene(scene, out, args.spp or 16, args.max_depth)
-    grid = aa_grid(args.spp or 16)
+    try:
+        result = compare_scene(scene, out, args.spp, args.max_depth, args.seed)
+    except PovExportError as error:
+        raise PovExportError(f"{args.scene}: {error}") from None
+    grid = aa_grid(args.spp)
     write_images(os.path.join(out, "povray"), result.povray)
     write_images(os.path.join(out, "lathe_whitted"), result.whitted)
     tiles = [("POV-Ray 3.7", result.povray), ("lathe_whitted", result.whitted)]
@@ -55,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("scene", help="Mitsuba scene file (XML)")
     cli.add_output_option(parser, default=os.path.join("out", "povray"), what="scene.pov, images, sheet")
-    cli.add_render_options(parser, spp_help="samples per pixel, rounded to n*n (default: 16)")
+    cli.add_render_options(parser, spp_default=16, spp_help="16; rounded to n*n, POV-Ray's n x n grid")
     parser.add_argument("--max-depth", type=int, default=10,
                         help="lathe_whitted max_depth and POV-Ray max_trace_level (default: 10)")
     return cli.run_command(PROG, parser, compare, argv)

@@ -60,3 +60,20 @@ def test_compare_povray_end_to_end(tmp_path, capsys):
     assert re.fullmatch(r"povray \d+\.\d\d s, lathe_whitted \d+\.\d\d s, ratio \d+\.\d\dx", last), last
     for name in ("scene.pov", "povray.exr", "lathe_whitted.exr", "sheet.png"):
         assert (out / name).is_file(), name
+
+
+def test_compare_povray_help_and_errors(tmp_path):
+    import subprocess
+    import sys
+
+    script = str(ROOT / "scripts" / "compare_povray.py")
+    proc = subprocess.run([sys.executable, script, "--help"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "-o DIR, --output DIR" in proc.stdout and "--spp" in proc.stdout
+    scene = tmp_path / "cylinder.xml"
+    scene.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
+                     '<integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>'
+                     '<shape type="cylinder"/><emitter type="point"/></scene>')
+    command = [sys.executable, script, str(scene), "-o", str(tmp_path / "o"), "--variant", VARIANT]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert f"{scene}: a Cylinder shape: shape 'Cylinder' has no POV-Ray counterpart here" in proc.stderr

@@ -90,7 +90,8 @@ def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple
     return image[..., :3], time.perf_counter() - start
 
 
-def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 10) -> Comparison:
+def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 10,
+                  seed: int = 0) -> Comparison:
     """Export ``scene`` to ``folder/scene.pov``, render both, compare."""
     from .images import image_errors
     from .povray_export import scene_to_pov
@@ -101,5 +102,5 @@ def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 1
     grid = aa_grid(spp)
     size = tuple(int(v) for v in scene.sensors()[0].film().size())
     povray, povray_seconds = render_povray(pov_file, size, grid)
-    whitted, whitted_seconds = render_whitted(scene, grid * grid, max_depth=max_depth)
+    whitted, whitted_seconds = render_whitted(scene, grid * grid, seed, max_depth)
     return Comparison(povray, whitted, povray_seconds, whitted_seconds, image_errors(whitted, povray))

@@ -158,10 +158,10 @@ def material(bsdf, ambient: np.ndarray, who: str) -> str:
 
 
 def shape_object(shape, ambient: np.ndarray) -> str:
-    """A POV-Ray object for a Mitsuba shape (lathe, rectangle)."""
+    """A POV-Ray object for a Mitsuba shape (lathe, rectangle, sphere)."""
     from ..plugin.shape import LatheShape
 
-    who = f"shape '{shape.id()}'"
+    who = f"shape '{shape.id()}'" if shape.id() else f"a {shape.class_name()} shape"
     texture = material(shape.bsdf(), ambient, who)
     if isinstance(shape, LatheShape):
         spline, points = lathe_spline(shape)
@@ -174,8 +174,11 @@ def shape_object(shape, ambient: np.ndarray) -> str:
         to_world = _matrix(_params(shape)["to_world"])
         corners = "<-1, -1, 0>, <1, -1, 0>, <1, 1, 0>, <-1, 1, 0>, <-1, -1, 0>"
         return f"polygon {{ 5, {corners}\n  {texture}\n  {pov_matrix(to_world)} }}\n"
+    if shape.class_name() == "Sphere":
+        to_world = _matrix(_params(shape)["to_world"])
+        return f"sphere {{ <0, 0, 0>, 1\n  {texture}\n  {pov_matrix(to_world)} }}\n"
     raise PovExportError(f"{who}: shape '{shape.class_name()}' has no POV-Ray counterpart here "
-                         "(lathe, rectangle)")
+                         "(lathe, rectangle, sphere)")
 
 
 def light_source(emitter) -> str:
