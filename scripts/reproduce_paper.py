@@ -10,8 +10,10 @@ See docs/method.md, "The paper's results".
 
 The figures, their profiles and references are data: ``scenes/paper/figures.json``
 (read by :mod:`lathe_shape.tools.paper`). For every figure the script renders
-the scene in ``scenes/paper/`` with the exact ``lathe_path`` integrator
-(``normal_check none``, the scene's max_depth), times it (after one warm-up
+the scene in ``scenes/paper/`` with the exact ``lathe_whitted`` integrator
+(the paper's Whitted ray tracing: Fresnel-weighted reflection and
+refraction, point lights, no noise; ``--integrator lathe_path`` path-traces
+instead; ``normal_check none``, the scene's max_depth), times it (after one warm-up
 render that compiles the kernels), and compares it with an exact,
 higher-spp reference of the *same object*:
 
@@ -69,7 +71,8 @@ def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dic
     defines = cli.parse_defines(args.defines)
     images, times, references = {}, {}, {}
     for name in paper.figures:
-        image, seconds = render_exact(paper.scene(name), spp, args.seed, size, defines, warm=True)
+        image, seconds = render_exact(paper.scene(name), spp, args.seed, size, defines, warm=True,
+                                      integrator=args.integrator)
         images[name], times[name] = image, seconds
         write_exr(os.path.join(out, f"{name}.exr"), image, {"spp": spp, "seconds": seconds})
         write_png(os.path.join(out, f"{name}.png"), image)
@@ -77,7 +80,7 @@ def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dic
     for name in sorted(paper.references):
         ref = paper.references[name]
         image, _ = render_exact(paper.scene(ref.figure), ref_spp, args.seed + 1, size, defines,
-                                profile_file=ref.profile_file)
+                                profile_file=ref.profile_file, integrator=args.integrator)
         references[name] = image
         write_exr(os.path.join(out, f"reference_{name}.exr"), image, {"spp": ref_spp})
         write_png(os.path.join(out, f"reference_{name}.png"), image)
@@ -117,7 +120,7 @@ def reproduce(args: argparse.Namespace) -> int:
     out = cli.output_folder(args.output)
     counts = segment_counts(paper)
     start = time.perf_counter()
-    print(f"{size[0]}x{size[1]}, {spp} spp (references {ref_spp} spp), lathe_path normal_check none, "
+    print(f"{size[0]}x{size[1]}, {spp} spp (references {ref_spp} spp), {args.integrator} normal_check none, "
           f"variant {args.variant}, seed {args.seed}", flush=True)
     images, times, references = render_all(paper, args, out, size, spp, ref_spp)
     rows = table_rows(paper, counts, images, times, references, ref_spp)
@@ -134,13 +137,16 @@ def reproduce(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lathe_shape.tools.paper import script_parser
+    from lathe_shape.tools.paper import PAPER_INTEGRATORS, script_parser
 
     parser = script_parser(PROG, __doc__, os.path.join("out", "paper"), "figures, references, table, sheet",
                            seed=7, quick="48x48, 4 spp, references 16 spp (a CI smoke run)",
                            defaults="512x512, 64 spp (the scenes' defaults), references 4x the spp")
     parser.add_argument("--ref-spp", type=int, help="reference spp (default 4x --spp, quick 16)")
     parser.add_argument("--make", action="store_true", help="regenerate the derived profiles and exit")
+    parser.add_argument("--integrator", choices=PAPER_INTEGRATORS, default=PAPER_INTEGRATORS[0],
+                        help="lathe_whitted: the paper's Whitted ray tracing, noise-free (default); "
+                             "lathe_path: path tracing")
     return cli.run_command(PROG, parser, reproduce, argv)
 
 

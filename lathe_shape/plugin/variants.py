@@ -59,18 +59,20 @@ def check_llvm(variant: str | None = None) -> None:
 
 
 def register(variant: str | None = None) -> None:
-    """Register the ``lathe`` shape and ``lathe_path`` integrator for the
-    active Mitsuba variant."""
+    """Register the ``lathe`` shape and the ``lathe_path`` and
+    ``lathe_whitted`` integrators for the active Mitsuba variant."""
     if variant is None:
         variant = mi.variant()
     if variant is None:
         return
     check_llvm(variant)
     from .lathe_path import register as register_integrator
+    from .lathe_whitted import register as register_whitted
     from .shape import register as register_shape
 
     register_shape()
     register_integrator()
+    register_whitted()
     __import__(f"{__package__}.lathe_prb", fromlist=["register"]).register()
 
 

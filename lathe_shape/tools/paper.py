@@ -7,8 +7,9 @@ expected segment count, the paper's time, which reference), the references
 divided at 0.5 degrees), how the derived profile files are made from their
 sources (arc specs, the fig. 8b control points), the contact sheet and the
 objects of the open-problems study. :func:`load_paper` reads it;
-:func:`render_exact` renders a figure with the exact ``lathe_path``
-integrator, optionally with another profile file.
+:func:`render_exact` renders a figure with the exact ``lathe_whitted``
+(the paper's Whitted ray tracing) or ``lathe_path`` integrator, optionally
+with another profile file.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from ..profiles import build_from_spec, read_points, spec_with_step, write_profi
 from ..profiles.arcs import read_profile_spec
 
 __all__ = [
+    "PAPER_INTEGRATORS",
     "PAPER_SCENES",
     "Figure",
     "Paper",
@@ -198,6 +200,11 @@ def _load(path: Path, defines: dict[str, str], resolution: tuple[int, int] | Non
         return load_scene(copy, defines, resolution)
 
 
+#: The integrators a paper figure can be rendered with: the paper's Whitted
+#: ray tracing (the default, noise-free) or path tracing.
+PAPER_INTEGRATORS = ("lathe_whitted", "lathe_path")
+
+
 def render_exact(
     path: str | os.PathLike,
     spp: int,
@@ -206,22 +213,27 @@ def render_exact(
     defines: dict[str, str] | None = None,
     profile_file: str | os.PathLike | None = None,
     warm: bool = False,
+    integrator: str = "lathe_whitted",
 ) -> tuple[np.ndarray, float]:
-    """Render a paper scene exactly (``lathe_path``, ``normal_check none``,
-    the scene's ``max_depth``); returns (image, seconds). ``profile_file`` swaps
-    the lathe's profile file; ``warm`` renders once first so that the time
+    """Render a paper scene exactly with ``integrator`` (one of
+    :data:`PAPER_INTEGRATORS`, ``normal_check none``, the scene's
+    ``max_depth``); returns (image, seconds). ``profile_file`` swaps the
+    lathe's profile file; ``warm`` renders once first so that the time
     excludes JIT compilation."""
     import mitsuba as mi
 
+    if integrator not in PAPER_INTEGRATORS:
+        raise ValueError(f"render_exact: unknown integrator '{integrator}' "
+                         f"(expected one of: {', '.join(PAPER_INTEGRATORS)})")
     path = Path(path)
     defines = {"spp": str(spp), **(defines or {})}
     scene = _load(path, defines, resolution, profile_file)
     max_depth = int(defines.get("max_depth", _declared_default(path, "max_depth") or -1))
-    integrator = mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "normal_check": "none"})
+    renderer = mi.load_dict({"type": integrator, "max_depth": max_depth, "normal_check": "none"})
     if warm:
-        mi.render(scene, spp=spp, seed=seed + 1000, integrator=integrator).numpy()
+        mi.render(scene, spp=spp, seed=seed + 1000, integrator=renderer).numpy()
     start = time.perf_counter()
-    image = mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
+    image = mi.render(scene, spp=spp, seed=seed, integrator=renderer).numpy()
     return image, time.perf_counter() - start
 
 

@@ -1,0 +1,354 @@
+"""The ``lathe_whitted`` integrator: Whitted ray tracing with exact lathes.
+
+.. list-table::
+   :header-rows: 1
+
+   * - Parameter
+     - Type
+     - Description
+   * - ``max_depth``
+     - integer
+     - Most surface interactions along one branch of the ray tree, >= 0.
+       1 renders only directly visible emitters, 2 adds direct light at the
+       first surface, 3 one specular bounce before it, and so on (as
+       ``lathe_path`` counts). (Default: 10)
+   * - ``cutoff``
+     - float
+     - A branch whose throughput (largest channel, the product of the
+       Fresnel and BSDF weights along it) falls below this is not traced,
+       as POV-Ray's ``adc_bailout``; in [0, 1). (Default: 1/255)
+   * - ``shadows``
+     - string
+     - ``opaque`` (default): every surface blocks light, as Mitsuba's
+       dielectrics do for emitter samples. ``filtered``: light reaches a
+       point through dielectrics (and thin dielectrics) in a straight line,
+       attenuated at every crossing by the surface's transmittance (the
+       Fresnel transmittance from the outside at that angle, times
+       ``specular_transmittance``), without refraction, as POV-Ray's shadows
+       through transparent objects.
+   * - ``normal_check``
+     - string
+     - What to do where the interpolated shading normal contradicts the real
+       surface (docs/method.md, eq. 11), as in ``lathe_path``: ``none``,
+       ``terminate`` (the branch stops) or ``fallback`` (default: that
+       vertex is redone with the geometric normal).
+
+The ray tree. Every camera ray starts a deterministic binary tree:
+
+* at a vertex whose BSDF has Dirac delta lobes (``dielectric``,
+  ``thindielectric``, ``conductor``, the specular coat of ``plastic``) the
+  reflected and the transmitted branches are both traced, each weighted by
+  its lobe's weight. The weights are the BSDF's own: :meth:`mi.BSDF.sample`
+  is called once with ``BSDFContext.type_mask`` set to the delta reflection
+  and once to the delta transmission (or null) lobe, so that the BSDF picks
+  that lobe with probability 1 and returns its Fresnel reflectance R or
+  transmittance T (times the radiance scaling 1/eta^2 and the BSDF's
+  ``specular_reflectance``/``specular_transmittance``). Nothing is random,
+  so the specular chains have no noise;
+* at a vertex whose BSDF has smooth (diffuse or glossy) lobes, direct light
+  is gathered from every emitter of the scene (point, spot, directional,
+  area, constant and environment emitters; ``Emitter.sample_direction``,
+  one sample and one shadow ray each), and the branch ends there. Point, spot and directional
+  lights are exact; area and environment emitters are sampled with the
+  sensor's sampler, so their soft shadows converge with the spp while the
+  rest of the image does not change;
+* a ray that leaves the scene sees the environment, and a ray that hits an
+  area emitter adds its radiance.
+
+The tree is traversed depth first inside one symbolic loop: where a vertex
+spawns two branches the reflected one is pushed onto a small per-lane stack
+(``max_depth - 1`` entries held in registers) and the transmitted one is
+followed; a branch that ends pops the next. No Python runs per ray, and
+lanes only wait for the others of their SIMD packet (LLVM) or warp (CUDA).
+
+Every ``lathe`` is intersected exactly (see
+:mod:`lathe_shape.plugin.scene_geometry`); all other shapes, BSDFs and
+emitters are Mitsuba's own. What Whitted ray tracing leaves out: caustics,
+light reaching a diffuse surface through glass other than by ``filtered``
+shadows, interreflection between diffuse surfaces, and rough (glossy)
+reflection of anything but the emitters. Participating media are not handled.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .lathe_path import NORMAL_CHECKS, with_geometric_frame
+from .params import typed_property
+from .scene_geometry import ExactSceneGeometry
+from .variants import register_jit_plugin
+
+__all__ = ["LatheWhittedIntegrator", "SHADOW_MODES", "register"]
+
+#: Values of the ``shadows`` parameter.
+SHADOW_MODES = ("opaque", "filtered")
+
+#: Most surfaces a ``filtered`` shadow ray crosses; behind more the point is
+#: taken as shadowed (a glass is crossed twice, a bottle four times).
+MAX_SHADOW_CROSSINGS = 16
+
+#: The delta lobes that spawn the two branches of the ray tree.
+REFLECTION = mi.BSDFFlags.DeltaReflection
+TRANSMISSION = mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.Null
+
+
+class PendingBranch:
+    """A branch of the ray tree waiting on a lane's stack."""
+
+    DRJIT_STRUCT = {"origin": mi.Point3f, "direction": mi.Vector3f, "weight": mi.Spectrum,
+                    "depth": mi.UInt32}
+
+    def __init__(self, ray: mi.Ray3f | None = None, weight: mi.Spectrum | None = None,
+                 depth: mi.UInt32 | None = None) -> None:
+        # The ray's origin and direction only: its time and wavelengths are
+        # the camera ray's, and its maxt infinite.
+        self.origin = mi.Point3f(0.0) if ray is None else ray.o
+        self.direction = mi.Vector3f(0.0) if ray is None else ray.d
+        self.weight = mi.Spectrum(0.0) if weight is None else weight
+        self.depth = mi.UInt32(0) if depth is None else depth
+
+
+def push_or_pop(stack: list[PendingBranch], branch: PendingBranch, push: mi.Bool,
+                pop: mi.Bool) -> tuple[list[PendingBranch], PendingBranch]:
+    """A lane's stack (top first) after pushing ``branch`` where ``push`` is
+    set and popping where ``pop`` is set (never both), and the popped entry.
+    The stack is a fixed list of registers shifted by selects: Dr.Jit's
+    local memory (``dr.alloc_local``) gave wrong results with per-lane
+    indices on the LLVM backend of Dr.Jit 1.5, and a shift costs a few
+    selects per entry, little next to an intersection."""
+    below = stack[1:] + [PendingBranch()]
+    above = [branch] + stack[:-1]
+    shifted = [dr.select(push, up, dr.select(pop, down, same))
+               for up, down, same in zip(above, below, stack, strict=True)]
+    return shifted, stack[0]
+
+
+def lobe_context(lobe: mi.BSDFFlags, mode: mi.TransportMode = mi.TransportMode.Radiance) -> mi.BSDFContext:
+    """A BSDF context that enables only ``lobe``."""
+    ctx = mi.BSDFContext(mode)
+    ctx.type_mask = lobe
+    return ctx
+
+
+class LatheWhittedIntegrator(mi.SamplingIntegrator):
+    """Whitted ray tracer that renders every ``lathe`` shape exactly (see
+    the module docstring for the parameters)."""
+
+    def __init__(self, props: mi.Properties) -> None:
+        super().__init__(props)
+        who = "lathe_whitted"
+        self.max_depth = typed_property(props, "max_depth", int, 10, who)
+        if self.max_depth < 0:
+            raise ValueError(f"lathe_whitted: parameter 'max_depth' must be >= 0, got {self.max_depth}")
+        self.cutoff = typed_property(props, "cutoff", float, 1.0 / 255.0, who)
+        if not 0.0 <= self.cutoff < 1.0:
+            raise ValueError(f"lathe_whitted: parameter 'cutoff' must be in [0, 1), got {self.cutoff}")
+        self.shadows = typed_property(props, "shadows", str, "opaque", who)
+        if self.shadows not in SHADOW_MODES:
+            raise ValueError(
+                f"lathe_whitted: parameter 'shadows': unknown mode '{self.shadows}' "
+                f"(expected one of: {', '.join(SHADOW_MODES)})"
+            )
+        self.normal_check = typed_property(props, "normal_check", str, "fallback", who)
+        if self.normal_check not in NORMAL_CHECKS:
+            raise ValueError(
+                f"lathe_whitted: parameter 'normal_check': unknown policy '{self.normal_check}' "
+                f"(expected one of: {', '.join(NORMAL_CHECKS)})"
+            )
+        self._geometry = None
+
+    def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
+        """The exact-lathe ray queries of ``scene``, rebuilt when its shapes
+        change (:meth:`ExactSceneGeometry.for_scene`)."""
+        current = ExactSceneGeometry.for_scene(scene, self._geometry)
+        # A scene without lathes is its own geometry; it owns this
+        # integrator, so keeping it would make a reference cycle.
+        self._geometry = None if not current.lathes else current
+        return current
+
+    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
+               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
+        """Mitsuba's render after building the scene geometry, so that its
+        construction is not recorded into the render's kernel (see
+        ``lathe_path``)."""
+        self.geometry(scene)
+        return super().render(scene, sensor, seed, spp, develop, evaluate)
+
+    @dr.syntax
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium = None,
+               active: mi.Bool = True) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
+        geometry = self.geometry(scene)
+
+        ray = mi.Ray3f(ray)                  # Ray of the branch being traced
+        weight = mi.Spectrum(1.0)            # Its throughput (Fresnel and BSDF weights so far)
+        depth = mi.UInt32(0)                 # Its number of surface interactions so far
+        pending = mi.UInt32(0)               # Branches waiting on this lane's stack ...
+        stack = [PendingBranch() for _ in range(max(self.max_depth - 1, 1))]  # ... top first
+        L = mi.Spectrum(0.0)                 # Radiance gathered by the whole tree
+        active = mi.Bool(active) & (self.max_depth > 0)  # Lanes with a branch to trace
+        valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
+
+        while dr.hint(active, max_iterations=-1, label="lathe_whitted"):
+            si = geometry.ray_intersect(ray, active)
+            valid = si.is_valid()
+            valid_ray |= active & valid & (depth == 0)
+
+            # Emitters seen directly or along a specular chain (area lights
+            # hit, the environment on a miss): no other strategy finds them.
+            L += dr.select(active, weight * si.emitter(scene).eval(si, active), 0.0)
+            vertex = active & valid & (depth + 1 < self.max_depth)
+
+            si, vertex, cos_in_geo = self.incident_check(si, ray, vertex)
+            bsdf = si.bsdf(ray)
+
+            # ------------- Direct light at diffuse and glossy lobes -------------
+            smooth = vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            L += weight * self.direct_light(scene, geometry, sampler, si, bsdf, cos_in_geo, smooth)
+
+            # ---------- The two specular branches, each with its weight ----------
+            wo_r, weight_r, go_r = self.specular_branch(bsdf, si, REFLECTION, cos_in_geo, vertex)
+            wo_t, weight_t, go_t = self.specular_branch(bsdf, si, TRANSMISSION, cos_in_geo, vertex)
+            weight_r *= weight
+            weight_t *= weight
+            go_r &= dr.max(weight_r) >= self.cutoff
+            go_t &= dr.max(weight_t) >= self.cutoff
+
+            # ------- Next branch: a child here, else the top of the stack -------
+            # Both children: push the reflection, follow the transmission.
+            push = go_r & go_t
+            follow = go_r | go_t
+            pop = active & ~follow & (pending > 0)
+            reflected = PendingBranch(si.spawn_ray(wo_r), weight_r, depth + 1)
+            stack, popped = push_or_pop(stack, reflected, push, pop)
+            pending[push] += 1
+            pending[pop] -= 1
+            ray_popped = mi.Ray3f(popped.origin, popped.direction, ray.time, ray.wavelengths)
+            ray = dr.select(follow, si.spawn_ray(dr.select(go_t, wo_t, wo_r)), ray_popped)
+            weight = dr.select(follow, dr.select(go_t, weight_t, weight_r), popped.weight)
+            depth = dr.select(follow, depth + 1, popped.depth)
+            active = follow | pop
+
+        return L, valid_ray, []
+
+    def incident_check(self, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
+                       vertex: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Bool, mi.Float]:
+        """Eq. 11 on the incident side (I . N* must agree with I . N) under
+        ``normal_check``: the vertex stops (``terminate``) or takes the
+        geometric frame (``fallback``). Returns (si, vertex, cos_in_geo)."""
+        cos_in_geo = dr.dot(si.n, -ray.d)
+        contradicts = vertex & (cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0)
+        if self.normal_check == "terminate":
+            vertex = vertex & ~contradicts
+        elif self.normal_check == "fallback":
+            si = with_geometric_frame(si, contradicts)
+        return si, vertex, cos_in_geo
+
+    def specular_branch(self, bsdf: mi.BSDF, si: mi.SurfaceInteraction3f, lobe: mi.BSDFFlags,
+                        cos_in_geo: mi.Float, active: mi.Bool) -> tuple[mi.Vector3f, mi.Spectrum, mi.Bool]:
+        """The branch of the delta ``lobe`` (reflection or transmission) at
+        ``si``: world direction, weight and whether it exists. Under
+        ``normal_check`` a reflection must stay on the incident side of the
+        real surface and a transmission must cross it (eq. 11); ``fallback``
+        redoes a contradicting branch with the geometric normal."""
+        ctx = lobe_context(lobe)
+        sample2 = mi.Point2f(0.5)  # unused by delta lobes, which are deterministic
+        bs, lobe_weight = bsdf.sample(ctx, si, 0.5, sample2, active)
+        exists = active & (bs.pdf > 0.0) & (dr.max(lobe_weight) > 0.0)
+        wo = si.to_world(bs.wo)
+        if self.normal_check == "none":
+            return wo, lobe_weight, exists
+        side = cos_in_geo * dr.dot(si.n, wo)
+        bad = exists & ((side <= 0.0) if lobe == REFLECTION else (side >= 0.0))
+        if self.normal_check == "terminate":
+            return wo, lobe_weight, exists & ~bad
+        si_geo = with_geometric_frame(si, bad)
+        bs_geo, weight_geo = bsdf.sample(ctx, si_geo, 0.5, sample2, bad)
+        wo = dr.select(bad, si_geo.to_world(bs_geo.wo), wo)
+        lobe_weight = dr.select(bad, weight_geo, lobe_weight)
+        exists &= ~bad | ((bs_geo.pdf > 0.0) & (dr.max(weight_geo) > 0.0))
+        return wo, lobe_weight, exists
+
+    @dr.syntax
+    def direct_light(self, scene: mi.Scene, geometry: ExactSceneGeometry, sampler: mi.Sampler,
+                     si: mi.SurfaceInteraction3f, bsdf: mi.BSDF, cos_in_geo: mi.Float,
+                     active: mi.Bool) -> mi.Spectrum:
+        """Light reflected at ``si`` from every emitter, one sample each, with
+        its shadow ray: as Whitted (and POV-Ray) sum over all lights, so that
+        point, spot and directional lights are exact. (Mitsuba's
+        ``Scene.sample_emitter_direction`` would pick one emitter at random,
+        which is noise.)"""
+        emitters = scene.emitters_dr()
+        reflected = mi.Spectrum(0.0)         # Light gathered so far
+        index = mi.UInt32(0)                 # The emitter sampled next
+        while dr.hint(active & (index < len(scene.emitters())), max_iterations=-1,
+                      label="lathe_whitted_lights"):
+            emitter = dr.gather(mi.EmitterPtr, emitters, index, active)
+            ds, emitter_weight = emitter.sample_direction(si, sampler.next_2d(), active)
+            # (A black emitter, e.g. a sky of radiance 0, costs no shadow ray.)
+            lit = active & (ds.pdf != 0.0) & (dr.max(emitter_weight) > 0.0)
+            if dr.hint(self.normal_check != "none", mode="scalar"):
+                # Eq. 11 for the light direction, as in lathe_path.
+                side_geo = dr.dot(si.n, ds.d) * cos_in_geo
+                side_sh = mi.Frame3f.cos_theta(si.to_local(ds.d)) * mi.Frame3f.cos_theta(si.wi)
+                lit &= side_geo * side_sh > 0.0
+            visibility = self.visibility(geometry, si, ds.p, lit)
+            bsdf_value = bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), lit)
+            reflected += dr.select(lit, bsdf_value * emitter_weight * visibility, 0.0)
+            index += 1
+        return reflected
+
+    def visibility(self, geometry: ExactSceneGeometry, si: mi.SurfaceInteraction3f, target: mi.Point3f,
+                   active: mi.Bool) -> mi.Spectrum:
+        """How much light passes from ``target`` to ``si`` (``shadows``)."""
+        if self.shadows == "filtered":
+            return self.filtered_visibility(geometry, si, target, active)
+        occluded = geometry.ray_test(si.spawn_ray_to(target), active)
+        return dr.select(occluded, mi.Spectrum(0.0), mi.Spectrum(1.0))
+
+    @dr.syntax
+    def filtered_visibility(self, geometry: ExactSceneGeometry, si: mi.SurfaceInteraction3f,
+                            target: mi.Point3f, active: mi.Bool) -> mi.Spectrum:
+        """Transmittance of the straight segment from ``si`` to ``target``
+        (``shadows`` = ``filtered``): the product of the delta (or null)
+        transmission weights of the surfaces crossed, each taken for light
+        arriving from the outside at that angle, in importance mode so that
+        no 1/eta^2 radiance scaling enters; 0 behind any other surface."""
+        ctx = lobe_context(TRANSMISSION, mi.TransportMode.Importance)
+        origin = mi.Interaction3f(si)        # Where the segment starts (last surface crossed)
+        transmittance = mi.Spectrum(1.0)     # Product of the crossings' transmittances
+        crossings = mi.UInt32(0)             # Surfaces crossed so far
+        active = mi.Bool(active)             # Lanes whose segment may hit more surfaces
+        while dr.hint(active, max_iterations=-1, label="lathe_whitted_shadow"):
+            to_target = target - origin.p
+            distance = dr.norm(to_target)
+            segment = origin.spawn_ray(to_target / distance)
+            segment.maxt = distance * (1.0 - mi.math.ShadowEpsilon)
+            hit = geometry.ray_intersect(segment, active)
+            active &= hit.is_valid()
+            # The transmittance of light arriving from outside at this angle,
+            # also where the segment leaves the glass: it is not refracted,
+            # so total internal reflection on the way out would be an
+            # artifact of the straight line.
+            hit.wi = mi.Vector3f(hit.wi.x, hit.wi.y, dr.abs(hit.wi.z))
+            bs, crossing = hit.bsdf(segment).sample(ctx, hit, 0.5, mi.Point2f(0.5), active)
+            transmittance[active] *= dr.select(bs.pdf > 0.0, crossing, 0.0)
+            crossings[active] += 1
+            blocked = active & (crossings >= MAX_SHADOW_CROSSINGS)
+            transmittance[blocked] = 0.0
+            active &= ~blocked & (dr.max(transmittance) > 0.0)
+            origin = dr.select(active, mi.Interaction3f(hit), origin)
+        return transmittance
+
+    def to_string(self) -> str:
+        return (
+            f"LatheWhittedIntegrator[max_depth={self.max_depth}, cutoff={self.cutoff:g}, "
+            f"shadows='{self.shadows}', normal_check='{self.normal_check}']"
+        )
+
+
+def register() -> None:
+    """Register ``<integrator type="lathe_whitted">`` for the active variant."""
+    register_jit_plugin(mi.register_integrator, "lathe_whitted", LatheWhittedIntegrator,
+                        lambda props: "lathe_whitted")
