@@ -59,21 +59,23 @@ def check_llvm(variant: str | None = None) -> None:
 
 
 def register(variant: str | None = None) -> None:
-    """Register the ``lathe`` shape and the ``lathe_path`` and
-    ``lathe_whitted`` integrators for the active Mitsuba variant."""
+    """Register the ``lathe`` shape and the ``lathe_path``,
+    ``lathe_whitted`` and ``lathe_prb`` integrators for the active Mitsuba
+    variant."""
     if variant is None:
         variant = mi.variant()
     if variant is None:
         return
     check_llvm(variant)
-    from .lathe_path import register as register_integrator
+    from .lathe_path import register as register_path
+    from .lathe_prb import register as register_prb
     from .lathe_whitted import register as register_whitted
     from .shape import register as register_shape
 
     register_shape()
-    register_integrator()
+    register_path()
     register_whitted()
-    __import__(f"{__package__}.lathe_prb", fromlist=["register"]).register()
+    register_prb()
 
 
 def on_variant_change(old: str | None, new: str | None) -> None:
