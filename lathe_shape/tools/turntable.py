@@ -210,11 +210,11 @@ class Turntable:
 
     def _setup_mode(self) -> None:
         """What each mode needs to pose the scene, and its warnings."""
-        from ..plugin.lathe_path import LathePathIntegrator
-
-        # lathe_path intersects lathes with their own transforms, so a spun
-        # lathe need not rebuild the scene's acceleration structure.
-        self._exact = isinstance(self.integrator, LathePathIntegrator)
+        # The package's integrators (lathe_path, lathe_whitted, lathe_prb)
+        # intersect lathes with their own transforms through their
+        # geometry(scene) (plugin/scene_geometry.py), so a spun lathe need
+        # not rebuild the scene's acceleration structure.
+        self._exact = callable(getattr(self.integrator, "geometry", None))
         if self.mode == "spin" and not is_textured(self.lathe):
             self.warnings.append(
                 f"lathe {self._label()} has no texture: a solid of revolution looks the same at every "
