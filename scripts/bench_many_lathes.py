@@ -4,19 +4,24 @@ against the lathe count, with the full reference mesh and with the proxy.
 A grid of wine glasses (scenes/wine_glass.csv, mesh_segments 512) on a floor
 under a constant sky, rendered with ``lathe_path``. Every case runs in a
 fresh process, so its peak memory (ru_maxrss) is its own; the render time is
-that of a second render (the first pays the JIT compilation, printed too).
+the median of the renders after the first (which pays the JIT compilation:
+its time less the median is printed as the compile time), with their
+spread. A last line per reference gives the render-time ratio of the largest
+count to 256 lathes (the target of scenes of many lathes: at most 1.2).
 Scenes load through `tools.scenes.load_string_in`, which loads scenes of more
 than 64 lathes sequentially (in parallel, hundreds of lathes exceed Python's
 recursion limit).
 
     python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy]
-                                        [--resolution 128x128] [--spp 4] [--variant llvm_ad_rgb]
+                                        [--resolution 128x128] [--spp 4] [--repeats 3]
+                                        [--variant llvm_ad_rgb]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import time
@@ -48,8 +53,10 @@ def scene_text(count: int, reference: str, width: int, height: int) -> str:
 </scene>"""
 
 
-def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str) -> dict:
-    """One case, in this process: load, first and second render times, peak RSS."""
+def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str,
+            repeats: int) -> dict:
+    """One case, in this process: load time, first render time, median and
+    spread of ``repeats`` further renders, peak RSS."""
     import resource
 
     import mitsuba as mi
@@ -63,12 +70,14 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
     load = time.perf_counter() - start
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
     times = []
-    for seed in (0, 1):
+    for seed in range(1 + repeats):
         start = time.perf_counter()
         mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
         times.append(time.perf_counter() - start)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return {"load": load, "first": times[0], "render": times[1], "peak_mb": peak}
+    later = sorted(times[1:])
+    return {"load": load, "first": times[0], "render": float(statistics.median(later)),
+            "spread": (later[0], later[-1]), "peak_mb": peak}
 
 
 def main() -> None:
@@ -78,31 +87,38 @@ def main() -> None:
     parser.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1000])
     parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"])
     add_render_options(parser, spp_default=4, resolution_default="128x128", defines=False)
+    parser.add_argument("--repeats", type=int, default=3, help="renders timed after the first (default: 3)")
     parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: run one case, print JSON
     args = parser.parse_args()
     size = parse_resolution(args.resolution)
     if args.case:
         count, reference = args.case.split(":")
-        print(json.dumps(measure(int(count), reference, size, args.spp, args.variant)))
+        print(json.dumps(measure(int(count), reference, size, args.spp, args.variant, args.repeats)))
         return
     print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, lathe_path max_depth 6, "
           "one process per case")
-    print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'1st render [s]':>16}"
-          f"{'render [s]':>12}{'vs 256':>8}")
+    print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'compile [s]':>13}"
+          f"{'render [s]':>12}{'(min-max)':>14}{'vs 256':>8}")
     for reference in args.references:
-        base = None
+        renders = {}
         for count in args.counts:
             command = [sys.executable, __file__, "--case", f"{count}:{reference}", "--resolution",
-                       args.resolution, "--spp", str(args.spp), "--variant", args.variant]
+                       args.resolution, "--spp", str(args.spp), "--repeats", str(args.repeats),
+                       "--variant", args.variant]
             result = subprocess.run(command, capture_output=True, text=True)
             if result.returncode != 0:
                 print(f"{count:>7}{reference:>10}  failed: {result.stderr.strip().splitlines()[-1:]}")
                 continue
             r = json.loads(result.stdout.strip().splitlines()[-1])
-            base = r["render"] if count == 256 else base
-            ratio = f"{r['render'] / base:7.2f}x" if base else "      -"
-            print(f"{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}{r['first']:>16.2f}"
-                  f"{r['render']:>12.2f}{ratio:>8}", flush=True)
+            renders[count] = r["render"]
+            ratio = f"{r['render'] / renders[256]:7.2f}x" if 256 in renders else "      -"
+            spread = f"({r['spread'][0]:.2f}-{r['spread'][1]:.2f})"
+            print(f"{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}"
+                  f"{r['first'] - r['render']:>13.2f}{r['render']:>12.3f}{spread:>14}{ratio:>8}", flush=True)
+        largest = max(renders, default=None)
+        if 256 in renders and largest != 256:
+            print(f"{reference}: render time {largest} / 256 lathes = {renders[largest] / renders[256]:.2f}x "
+                  "(target: at most 1.2x)")
 
 
 if __name__ == "__main__":

@@ -197,12 +197,33 @@ def threaded_bvh(
 # Kernel data
 # ---------------------------------------------------------------------------
 
+def _aligned(values: np.ndarray, dtype) -> np.ndarray:
+    """A copy of ``values`` as ``dtype`` whose memory starts on a 64-byte
+    boundary.
+
+    Dr.Jit uses a numpy array's memory as it is (no copy), and turns a
+    gather of adjacent values (a ``Vector4f`` from a Float buffer) into one
+    packet load only when that memory is aligned: without this, the traced
+    kernel (and its hash) would depend on where numpy happened to allocate
+    the data."""
+    values = np.asarray(values, dtype=dtype)
+    raw = np.empty(values.nbytes + 64, dtype=np.uint8)
+    start = -raw.ctypes.data % 64
+    out = raw[start:start + values.nbytes].view(values.dtype).reshape(values.shape)
+    out[...] = values
+    return out
+
+
 def opaque(value, cls=None):
     """``cls(value)`` (default ``mi.Float``) marked opaque: its values are
     passed to kernels as parameters instead of being baked in as literals,
     so that a kernel traced once serves every profile (no recompilation on
-    new data)."""
-    result = (mi.Float if cls is None else cls)(value)
+    new data). Arrays are first copied to aligned memory (see
+    :func:`_aligned`)."""
+    cls = mi.Float if cls is None else cls
+    if isinstance(value, np.ndarray) and value.ndim > 0:
+        value = _aligned(value, np.uint32 if cls is mi.UInt32 else np.float32)
+    result = cls(value)
     dr.make_opaque(result)
     return result
 
@@ -229,7 +250,14 @@ class LatheData:
         Opaque Float scalars of the unit frame (see :func:`unit_frame`):
         ``S``, ``1 / S`` and ``-z_c / S``; a local point ``p`` maps to
         ``(p_x / S, p_y / S, p_z / S - z_c / S)``.
+    ``node_base``
+        ``None`` for one lathe's own data. In a view of several profiles'
+        concatenated data (kernels/top_level.py) the scalars above are
+        per-lane arrays, and this UInt32 is where the profile's nodes start
+        (its links and leaf indices are already global there).
     """
+
+    node_base = None
 
     def __init__(self, **kwargs) -> None:
         for key, value in kwargs.items():
@@ -351,6 +379,8 @@ class LatheRay:
         # outer child first when moving towards the axis
         copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b <= 0, 0, 1)
         self.first = mi.UInt32(copy) * data.n_nodes
+        if data.node_base is not None:
+            self.first += data.node_base
         self.end = self.first + data.n_nodes
 
     def _unit_frame(self, data: LatheData, o, d, tmax, active):

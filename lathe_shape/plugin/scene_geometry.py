@@ -7,8 +7,17 @@ area emitters and textures are the same), Mitsuba traces it, and every lathe's
 exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
 reference triangles are therefore never reported.
 
-The second scene is built once per set of shapes. A lathe that moves needs
-nothing (its kernel reads its transform); when other shapes move (through
+Lathes are intersected by kind (see kernels/top_level.py): a kind with
+several lathes goes through one :class:`~lathe_shape.kernels.top_level.LatheSet`
+(their profiles' kernel data concatenated, lathes of the same profile
+sharing it, and a BVH over the lathes' world boxes), so the traced kernel
+is the same for 2 or 2000 lathes and a ray only visits the lathes whose box
+it enters; a kind with one lathe calls that lathe's own kernel.
+
+The second scene is built once per set of shapes. A lathe that moves
+(:meth:`LatheShape.set_to_world`) is followed before the next query: its
+kind's transforms and top-level BVH are rebuilt as opaque arrays (no
+recompilation); when other shapes move (through
 ``mi.traverse`` of the original scene, which updates the shared objects in
 place) only the second scene's acceleration structure is rebuilt
 (:meth:`ExactSceneGeometry.refresh`): automatically when a shape's bounding
@@ -19,13 +28,18 @@ that keeps it (say a square floor turned by 90 degrees).
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
+from ..kernels.common import opaque
+from ..kernels.top_level import LatheSet, ProfileTable
+from .interaction import lathe_interaction
 from .shape import LatheShape, scene_lathes
 
-__all__ = ["ExactSceneGeometry"]
+__all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
 
 
 class ExactSceneGeometry:
@@ -39,6 +53,13 @@ class ExactSceneGeometry:
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = scene_lathes(scene)
         others = [s for s in shapes if not isinstance(s, LatheShape)]
+        by_kind: dict[str, list[LatheShape]] = {}
+        for lathe in self.lathes:
+            by_kind.setdefault(lathe.surface.kind, []).append(lathe)
+        #: Lathes intersected by their own kernel (the only one of their kind).
+        self.single = [group[0] for group in by_kind.values() if len(group) == 1]
+        #: Kinds of several lathes, each intersected as one set.
+        self.groups = [LatheGroup(group) for group in by_kind.values() if len(group) > 1]
         if any(s.class_name() == "Instance" for s in others):
             self._refuse_instanced_lathes(scene)
         if not self.lathes:
@@ -94,6 +115,7 @@ class ExactSceneGeometry:
         scene); else a new one."""
         if previous is None or previous.fingerprint != cls.scene_fingerprint(scene):
             return cls(scene)
+        previous.follow_moves()
         if previous.bounds == cls.rest_bounds(scene):
             return previous
         moved = copy.copy(previous)
@@ -123,19 +145,91 @@ class ExactSceneGeometry:
                 params.set_dirty(key)
         params.update()
 
+    def follow_moves(self) -> None:
+        """Bring the lathe sets up to date with lathes moved since the last
+        query (numpy; no recompilation)."""
+        for group in self.groups:
+            group.follow_moves()
+
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
+        self.follow_moves()
         si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
-        for lathe in self.lathes:
+        for lathe in self.single:
             ray_lathe = mi.Ray3f(ray)
             ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
             si_lathe = lathe.ray_intersect_exact(ray_lathe, active)
             si = dr.select(si_lathe.t < si.t, si_lathe, si)
+        for group in self.groups:
+            si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
+            si = dr.select(si_group.t < si.t, si_group, si)
         return si
 
     def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
         """Is anything hit along ``ray`` before ``ray.maxt``?"""
+        self.follow_moves()
         occluded = self.rest.ray_test(ray, active)
-        for lathe in self.lathes:
+        for lathe in self.single:
             occluded |= lathe.ray_test_exact(ray, active & ~occluded)
+        for group in self.groups:
+            occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
+
+
+def profile_key(lathe: LatheShape) -> tuple:
+    """What makes two lathes' kernel data equal: the kind, the shading mode
+    and every array and number of the validated profile (not its source
+    name). Lathes with equal keys share one profile's data."""
+    surface = lathe.surface
+    key: list = [surface.kind, surface.smooth]
+    for field in dataclasses.fields(surface.profile):
+        value = getattr(surface.profile, field.name)
+        if isinstance(value, np.ndarray):
+            key.append((value.dtype.str, value.shape, value.tobytes()))
+        elif not isinstance(value, str):
+            key.append(value)
+    return tuple(key)
+
+
+class LatheGroup:
+    """The lathes of one kind, intersected as one
+    :class:`~lathe_shape.kernels.top_level.LatheSet`: the Mitsuba side (shape
+    pointers, ``flip_normals``, following moves)."""
+
+    def __init__(self, lathes: list[LatheShape]) -> None:
+        self.lathes = lathes
+        profiles: dict[tuple, int] = {}
+        first: list[LatheShape] = []  # the first lathe of each distinct profile
+        profile_of = []
+        for lathe in lathes:
+            key = profile_key(lathe)
+            if key not in profiles:
+                profiles[key] = len(first)
+                first.append(lathe)
+            profile_of.append(profiles[key])
+        table = ProfileTable(lathes[0].surface.kind, [lathe.surface.data for lathe in first],
+                             [lathe.surface.smooth for lathe in first])
+        self._matrices = [lathe.to_world_matrix for lathe in lathes]
+        #: The lathes' kernels: profiles, transforms, top-level BVH.
+        self.set = LatheSet(table, profile_of, np.stack(self._matrices))
+        self.shapes = mi.ShapePtr(lathes)
+        dr.make_opaque(self.shapes)
+        self.flip = opaque(np.array([lathe.flip for lathe in lathes], dtype=np.uint32), mi.UInt32)
+
+    def follow_moves(self) -> None:
+        """Rebuild the transforms and the top-level BVH when a lathe moved
+        (``set_to_world`` gives it a new matrix object)."""
+        matrices = [lathe.to_world_matrix for lathe in self.lathes]
+        if any(new is not old for new, old in zip(matrices, self._matrices, strict=True)):
+            self.set.set_transforms(np.stack(matrices))
+            self._matrices = matrices
+
+    def ray_intersect(self, ray: mi.Ray3f, tmax: mi.Float, active: mi.Bool) -> mi.SurfaceInteraction3f:
+        """Nearest hit with any of the lathes before ``tmax``."""
+        hit = self.set.intersect(ray.o, ray.d, tmax, active)
+        geo, prim_index = self.set.geometry(hit, ray.o, ray.d)
+        flip = dr.gather(mi.UInt32, self.flip, hit.lathe, hit.valid) != 0
+        geo.n = dr.select(flip, -geo.n, geo.n)
+        geo.sh_n = dr.select(flip, -geo.sh_n, geo.sh_n)
+        shape = dr.gather(mi.ShapePtr, self.shapes, hit.lathe, hit.valid)
+        return lathe_interaction(ray, hit, geo, prim_index, shape)

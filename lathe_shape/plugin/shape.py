@@ -83,8 +83,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..kernels.common import LatheGeometry
 from ..profiles import ProfileError, parse_profile_string, read_points, read_profile_options
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
+from .interaction import lathe_interaction
 from .params import check_transform, describe_lathe, transform_property, typed_property
 from .reference_mesh import check_mesh_budget, reference_steps
 from .variants import register_jit_plugin
@@ -306,21 +308,10 @@ class LatheShape(mi.Mesh):
         sh_n = dr.normalize(self._to_world @ mi.Normal3f(geo.sh_n))
         if self.flip:
             n, sh_n = -n, -sh_n
-
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        si.t = dr.select(valid, hit.t, dr.inf)
-        si.time = ray.time
-        si.wavelengths = ray.wavelengths
-        si.p = dr.select(valid, ray(t), 0.0)
-        si.n = n
-        si.sh_frame = mi.Frame3f(sh_n)
-        si.uv = geo.uv
-        si.dp_du = self._to_world @ geo.dp_du
-        si.dp_dv = self._to_world @ geo.dp_dv
-        si.prim_index = hit.seg
-        si.shape = dr.select(valid, mi.ShapePtr(self), dr.zeros(mi.ShapePtr))
-        si.wi = dr.select(valid, si.to_local(-ray.d), 0.0)
-        return si
+        world = LatheGeometry(n=n, sh_n=sh_n, uv=geo.uv, dp_du=self._to_world @ geo.dp_du,
+                              dp_dv=self._to_world @ geo.dp_dv)
+        shape = dr.select(valid, mi.ShapePtr(self), dr.zeros(mi.ShapePtr))
+        return lathe_interaction(ray, hit, world, hit.seg, shape)
 
     def to_string(self) -> str:
         r_max, z_min, z_max = self.profile.bounds()
