@@ -99,6 +99,7 @@ thresholds below are relative to the profile whatever the user's units.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -136,8 +137,8 @@ _STRIDE = 8
 #: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
 #: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
 #: the leaf's parameter u), then (t0, h, segment, r_squared): the last is 1
-#: where the R slots hold R^2 (the sor kind; the kernel reads the Python flag
-#: ``BSplineData.r_squared``, this copy serves data that mixes kinds).
+#: where the R slots hold R^2 (the sor kind; the kernel reads the flag from
+#: ``BSplineData``, see :func:`_squared`).
 _LEAF_STRIDE = 20
 
 #: Longest leaf, in segment parameter t (before padding).
@@ -182,6 +183,9 @@ class BSplineData(LatheData):
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
         r_squared: Python bool, True when the ``R`` slots hold ``R^2`` (the
             ``sor`` kind, :func:`build_cubic_data`); chosen when tracing.
+        r_squared_flag: the same as an opaque ``mi.UInt32`` (0 or 1): a view
+            of several profiles' data (kernels/top_level.py) gathers it per
+            lane, so that one kernel serves profiles of both forms.
         bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
             cylinder of the whole curve (the union of the leaf boxes).
         scale, inv_scale, z_shift: the unit frame (kernels/common.py), in
@@ -318,6 +322,7 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
         n_seg_host=n_seg,
         n_leaf_host=len(leaves),
         r_squared=r_squared,
+        r_squared_flag=opaque(int(r_squared), mi.UInt32),
         bound_r=opaque(float(boxes[:, 1].max())),
         bound_z_lo=opaque(float(boxes[:, 2].min())),
         bound_z_hi=opaque(float(boxes[:, 3].max())),
@@ -328,6 +333,29 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
 # ---------------------------------------------------------------------------
 # Polynomial helpers (unrolled per degree, vectorized over lanes)
 # ---------------------------------------------------------------------------
+
+def _squared(data: LatheData):
+    """Whether the ``R`` slots of ``data`` hold ``R^2`` (the sor kind, eq.
+    20): the Python bool of one lathe's own :class:`BSplineData`, so that
+    its kernel is specialised to one form; else (a view of several profiles'
+    data, kernels/top_level.py, which has no such bool) a per-lane mask
+    from the profile's ``r_squared_flag``."""
+    flag = getattr(data, "r_squared", None)
+    return flag if isinstance(flag, bool) else data.r_squared_flag != 0
+
+
+def _by_form(squared, of_square: Callable, of_radius: Callable, *args):
+    """``of_square(*args)`` where ``squared`` (see :func:`_squared`), else
+    ``of_radius(*args)``: only the one needed for a Python bool, both
+    selected per lane for a mask. The callables return a value or a
+    tuple/list."""
+    if isinstance(squared, bool):
+        return of_square(*args) if squared else of_radius(*args)
+    a, b = of_square(*args), of_radius(*args)
+    if isinstance(a, (list, tuple)):
+        return type(a)(dr.select(squared, x, y) for x, y in zip(a, b, strict=True))
+    return dr.select(squared, a, b)
+
 
 def _polyval(c: list, x):
     """Horner evaluation of ascending coefficients ``c`` at ``x``."""
@@ -493,22 +521,26 @@ def _bezier_elevate(p: list) -> list:
             (p[2] + p[3]) * 0.5, p[3]]
 
 
-def _hull(Rb, Zb, ray: _Ray, r_squared: bool = False):
+def _hull(Rb, Zb, ray: _Ray, squared=False):
     """Bernstein coefficients of ``F`` (eqs. 13-15, in the form of the module
     docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
-    float32 error of ``F`` and of these coefficients there. ``r_squared``:
-    ``Rb`` holds ``R^2`` itself (eq. 20), not ``R``."""
+    float32 error of ``F`` and of these coefficients there. ``squared`` (a
+    bool or a mask, :func:`_squared`): ``Rb`` holds ``R^2`` itself (eq. 20),
+    not ``R``."""
     W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
     R = [Rb.x, Rb.y, Rb.z, Rb.w]
     W2 = _bezier_square(W)
-    R2 = _bezier_elevate(R) if r_squared else _bezier_square(R)
+    R2 = _by_form(squared, lambda: _bezier_elevate(R), lambda: _bezier_square(R))
     k2 = ray.d.z * ray.d.z
     G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
-    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull).
+    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull); the bound on R^2.
     mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
-    Rm = [dr.abs(x) for x in R] if r_squared else R
-    mr = dr.maximum(dr.maximum(Rm[0], Rm[1]), dr.maximum(Rm[2], Rm[3]))
-    bound = dr.fma(ray.a, mw * mw, k2 * ((mr if r_squared else mr * mr) + ray.r0sq))
+
+    def largest(v):
+        return dr.maximum(dr.maximum(v[0], v[1]), dr.maximum(v[2], v[3]))
+
+    mr = _by_form(squared, lambda: largest([dr.abs(x) for x in R]), lambda: largest(R))
+    bound = dr.fma(ray.a, mw * mw, k2 * (_by_form(squared, lambda: mr, lambda: mr * mr) + ray.r0sq))
     return G, _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
 
 
@@ -535,7 +567,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
         base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        G, tol = _hull(Rb, Zb, ray, data.r_squared)
+        G, tol = _hull(Rb, Zb, ray, _squared(data))
         cand = m & ~_one_sign(G, tol)
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
@@ -561,12 +593,13 @@ class _Leaf:
         self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
-        self.r_squared = data.r_squared  # R holds R^2 (eq. 20)
-        self.Gb, self.tol = _hull(Rb, Zb, ray, data.r_squared)
+        self.squared = _squared(data)  # R holds R^2 (eq. 20)
+        self.Gb, self.tol = _hull(Rb, Zb, ray, self.squared)
         # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 13-15, times d_z^2)
         W = [self.Z[0] - ray.zc] + self.Z[1:]
         W2 = _polymul(W, W)
-        R2 = self.R + [mi.Float(0.0)] * 3 if self.r_squared else _polymul(self.R, self.R)
+        R2 = _by_form(self.squared, lambda: self.R + [mi.Float(0.0)] * 3,
+                      lambda: _polymul(self.R, self.R))
         R2[0] = R2[0] - ray.r0sq
         k2 = ray.d.z * ray.d.z
         self.F = [dr.fma(ray.a, W2[k], -k2 * R2[k]) for k in range(7)]
@@ -587,7 +620,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_se
     tangent = ~found & (fmin <= tol)
     u = dr.select(found, u, dr.select(near0, x0, x1))
     Rt = _polyval(lf.R, u)
-    R2t = Rt if lf.r_squared else Rt * Rt  # R(t)^2
+    R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
     Zt = _polyval(lf.Z, u)
     # A real hit has R(t) >= the ray's distance r0 from the axis. For
     # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
@@ -715,11 +748,12 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     R = [dr.gather(mi.Float, data.seg, base + k, active) for k in range(4)]
     Z = [dr.gather(mi.Float, data.seg, base + 4 + k, active) for k in range(4)]
     o, dh = ray.o, ray.d
+    squared = _squared(data)
     for _ in range(_STEPS_POLISH):
         Rt, dR = _polyval_d(R, t)
         Zt, dZ = _polyval_d(Z, t)
         # R(t)^2 and its derivative 2 R R' (the sor kind stores R^2 itself)
-        R2t, dR2 = (Rt, dR) if data.r_squared else (Rt * Rt, 2.0 * Rt * dR)
+        R2t, dR2 = _by_form(squared, lambda r, dr_: (r, dr_), lambda r, dr_: (r * r, 2.0 * r * dr_), Rt, dR)
         qx = dr.fma(dh.x, s, o.x)
         qy = dr.fma(dh.y, s, o.y)
         g1 = dr.fma(dh.z, s, o.z) - Zt
@@ -775,13 +809,14 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
     tan_r, tan_z = dR, dZ
-    if data.r_squared:
+    squared = _squared(data)
+    if squared is not False:
         # R holds R^2 (eq. 20): the tangent (R', Z') = ((R^2)' / 2R, Z') is
         # parallel to ((R^2)', 2 R Z'), finite on the axis too.
         radius = dr.sqrt(dr.maximum(Rt, 0.0))
-        tan_r, tan_z = dR, 2.0 * radius * dZ
-        dR = dR * dr.rcp(2.0 * dr.maximum(radius, 1e-6))
-        Rt = radius
+        tan_z, dR, Rt = _by_form(squared, lambda: (2.0 * radius * dZ,
+                                                   dR * dr.rcp(2.0 * dr.maximum(radius, 1e-6)), radius),
+                                 lambda: (tan_z, dR, Rt))
     chord_r = R[1] + R[2] + R[3]
     chord_z = Z[1] + Z[2] + Z[3]
     speed2 = dr.fma(tan_r, tan_r, tan_z * tan_z)
