@@ -83,7 +83,10 @@ bracketed root is found by safeguarded Newton steps (bisection when a step
 leaves the bracket or converges slowly; the answer is the evaluated point
 with the least ``|F|``), so no root with a sign change can be missed; the
 iteration count only limits precision; the steps run in a symbolic loop
-that ends once all lanes of a packet converged. A critical point where ``|F|`` is
+that ends once all lanes of a packet converged. The searches of one level
+(the brackets between the critical points of one derivative, the intervals
+of ``F``) share one loop, which gives shorter and faster LLVM code than a
+loop per bracket, with the same results. A critical point where ``|F|`` is
 below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision: in float32 the coefficients of ``F`` would lose most of their
@@ -386,7 +389,6 @@ def _polymul(p: list, q: list) -> list:
     return out
 
 
-@dr.syntax
 def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     """Root of the polynomial ``c`` (derivative ``dc``) on [x0, x1], where it
     is monotonic; ``f0``, ``f1`` are its values at the ends.
@@ -403,42 +405,69 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     ``x`` is ``x1`` (this keeps the list of critical points sorted for the
     next level).
     """
-    found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
-    neg0 = f0 < 0
-    a = mi.Float(x0)                   # bracket [a, b]; f(a) has the sign of f0
-    b = mi.Float(x1)
-    x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
-    x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
-    dx_old = b - a                     # step before last
-    dx = mi.Float(dx_old)              # last step
-    done = ~found                      # converged (or nothing to find)
-    best_x = mi.Float(x)               # evaluated point with the least |f|
-    best_f = mi.Float(dr.inf)          # its |f|
-    k = mi.UInt32(0)                   # steps taken
-    while ~done & (k < steps):
-        f, df = _polyval_d(c, x)
-        # Near the root f is float32 noise, and the steps below may then
-        # bisect away from it; the least |f| seen is the answer.
-        better = dr.abs(f) < best_f
-        best_x = dr.select(better, x, best_x)
-        best_f = dr.select(better, dr.abs(f), best_f)
-        left = (f < 0) == neg0
-        a = dr.select(left, x, a)
-        b = dr.select(left, b, x)
-        # Converged: an exact zero, or a Newton step below float32
-        # resolution of t (checked first: the test below would then pick
-        # bisection and jump away from the root).
-        done |= (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
-        # Newton unless it leaves [a, b] or converges slower than bisection.
-        xn = x - f / df
-        newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
-        dx_old = dx
-        x_new = dr.select(newton, xn, 0.5 * (a + b))
-        dx = x_new - x
-        x = dr.select(done, x, x_new)
-        k += 1
-    x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, best_x))
-    return dr.select(found, x, x1), found
+    return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
+
+
+def _bracket_roots(c: list, dc: list, brackets: list, steps: int) -> list:
+    """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
+    of one polynomial at once (``mask``: lanes that search it, ``None``:
+    all), in one symbolic loop: every bracket takes the same steps as on its
+    own (a converged bracket's point stays put), so the results are the
+    same, and a kernel holds one loop instead of one per bracket (fewer
+    loops make faster LLVM code, even where they seldom run)."""
+    state, starts = [], []
+    for x0, x1, f0, f1, mask in brackets:
+        found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
+        if mask is not None:
+            found &= mask
+        a, b = mi.Float(x0), mi.Float(x1)  # bracket [a, b]; f(a) has the sign of f0
+        x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
+        x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
+        # (a, b, x, step before last, last step, converged or nothing to
+        # find, evaluated point with the least |f|, its |f|)
+        state.append((a, b, x, b - a, b - a, ~found, mi.Float(x), mi.Float(dr.inf)))
+        starts.append((found, f0 < 0))
+
+    def pending(k, state):
+        todo = ~state[0][5]
+        for bracket in state[1:]:
+            todo |= ~bracket[5]
+        return todo & (k < steps)
+
+    def step(k, state):
+        return k + 1, [_newton_step(c, dc, bracket, neg0)
+                       for bracket, (_, neg0) in zip(state, starts, strict=True)]
+
+    _, state = dr.while_loop((mi.UInt32(0), state), pending, step)
+    out = []
+    for (x0, x1, f0, f1, _), (found, _), bracket in zip(brackets, starts, state, strict=True):
+        x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, bracket[6]))
+        out.append((dr.select(found, x, x1), found))
+    return out
+
+
+def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
+    """One safeguarded Newton step of :func:`_bracket_roots` on one bracket
+    state (the order of its fields is documented there)."""
+    a, b, x, dx_old, dx, done, best_x, best_f = bracket
+    f, df = _polyval_d(c, x)
+    # Near the root f is float32 noise, and the steps below may then
+    # bisect away from it; the least |f| seen is the answer.
+    better = dr.abs(f) < best_f
+    best_x = dr.select(better, x, best_x)
+    best_f = dr.select(better, dr.abs(f), best_f)
+    left = (f < 0) == neg0
+    a = dr.select(left, x, a)
+    b = dr.select(left, b, x)
+    # Converged: an exact zero, or a Newton step below float32 resolution of
+    # t (checked first: the test below would then pick bisection and jump
+    # away from the root).
+    done = done | (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
+    # Newton unless it leaves [a, b] or converges slower than bisection.
+    xn = x - f / df
+    newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
+    x_new = dr.select(newton, xn, 0.5 * (a + b))
+    return a, b, dr.select(done, x, x_new), dx, x_new - x, done, best_x, best_f
 
 
 def _isolate_critical(derivs: list, lo, hi) -> list:
@@ -459,10 +488,8 @@ def _isolate_critical(derivs: list, lo, hi) -> list:
         dc = derivs[level + 1]
         xs = [lo] + crit + [hi]
         fs = [_polyval(c, xk) for xk in xs]
-        crit = []
-        for j in range(len(xs) - 1):
-            r, _ = _bracket_root(c, dc, xs[j], xs[j + 1], fs[j], fs[j + 1], _STEPS_CRIT)
-            crit.append(r)
+        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
+        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
     return crit
 
 
@@ -606,13 +633,21 @@ class _Leaf:
         self.dF = _polyder(self.F)
 
 
-def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_seg, m):
+def _interval_roots(lf: _Leaf, intervals: list) -> list:
+    """The roots ``(u, found)`` of ``F`` on the intervals ``(x0, x1, f0, f1,
+    mask)`` where it is monotonic (values ``f0``, ``f1`` at the ends), for
+    :func:`_take_interval`: one loop for all (:func:`_bracket_roots`)."""
+    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT)
+
+
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best_s, best_u, best_seg, m):
     """The root of ``F`` on [x0, x1], where it is monotonic (values ``f0``,
-    ``f1`` at the ends), or a tangent root at an end; updates the nearest
-    hit. See the module docstring for the choice of ``s``."""
+    ``f1`` at the ends; ``root``: from :func:`_interval_roots`), or a
+    tangent root at an end; updates the nearest hit. See the module
+    docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
-    u, found = _bracket_root(lf.F, lf.dF, x0, x1, f0, f1, _STEPS_ROOT)
+    u, found = root
     # No sign change: a tangent (double) root at the endpoint with the
     # smaller |F|, if that is within float32 noise of 0.
     fmin = dr.minimum(dr.abs(f0), dr.abs(f1))
@@ -664,9 +699,9 @@ def _solve_chain(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
         derivs.append(_polyder(derivs[-1]))
     xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
     fs = [_polyval(lf.F, x) for x in xs]
-    for j in range(len(xs) - 1):
-        best_s, best_u, best_seg = _take_interval(lf, ray, xs[j], xs[j + 1], fs[j], fs[j + 1],
-                                                  best_s, best_u, best_seg, m)
+    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
+    for interval, root in zip(intervals, _interval_roots(lf, intervals), strict=True):
+        best_s, best_u, best_seg = _take_interval(lf, ray, *interval[:4], root, best_s, best_u, best_seg, m)
     return best_s, best_u, best_seg
 
 
@@ -694,11 +729,13 @@ def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m)
         c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
                              sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
         f_c = _polyval(lf.F, c)
-    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c,
+    f_1 = sum(lf.F[1:], lf.F[0])  # F(1)
+    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.F[0], f_c, fast),
+                                         (c, mi.Float(1.0), f_c, f_1, split)])
+    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c, first,
                                               best_s, best_u, best_seg, fast)
     if split:
-        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c,
-                                                  sum(lf.F[1:], lf.F[0]),
+        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c, f_1, second,
                                                   best_s, best_u, best_seg, split)
     slow = m & ~simple
     if slow:
