@@ -62,9 +62,10 @@ Bernstein coefficients of ``F`` directly, and when all exceed the float32
 error bound ``tol`` in magnitude with one sign (convex hull property), ``F``
 has no root, not even a grazing one, on the leaf. Only the leaves that pass
 (usually the few that the ray really crosses) are solved: an inner loop walks
-the tree to the next such leaf, so all lanes of a SIMD packet solve together
-(the Bernstein test itself is skipped by packets with no lane at an entered
-leaf).
+the tree to the next entered leaf, so all lanes of a SIMD packet test and
+solve together; the Bernstein test runs there, outside the walk (a walk
+step with it is much slower, although a packet without a lane at a leaf
+skips it), and a packet with no lane that passes skips the solve.
 
 Root finding on a leaf (after C. Yuksel, "High-Performance Polynomial Root
 Finding for Graphics", HPG 2022): the roots of ``F'`` split [0, 1] into
@@ -580,22 +581,14 @@ def _one_sign(c: list, tol):
     return (lo > tol) | (hi < -tol)
 
 
-@dr.syntax
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
     """One traversal step: ``(candidate, next node)``. A candidate is a leaf
-    whose box the ray enters before ``best`` and whose Bernstein hull of
-    ``F`` does not exclude a root (or a grazing contact)."""
+    whose box the ray enters before ``best`` (:func:`_solve_leaf` tests its
+    Bernstein hull)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
     link, is_leaf, leaf = common.bvh_link(data.links, node, active)
     enter = _box_enter(ray, box, best, active)
-    m = enter & is_leaf
-    cand = mi.Bool(False)  # an entered leaf that F may cross or touch
-    if m:
-        base = leaf * (_LEAF_STRIDE // 4)
-        Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
-        Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        G, tol = _hull(Rb, Zb, ray, _squared(data))
-        cand = m & ~_one_sign(G, tol)
+    cand = enter & is_leaf
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
     nxt = dr.select(cand, node, common.bvh_next(node, link, is_leaf, enter))
@@ -707,8 +700,19 @@ def _solve_chain(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
 
 @dr.syntax
 def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m):
-    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit."""
+    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit.
+    Lanes where the Bernstein hull of ``F`` excludes a root (or a grazing
+    contact) on the leaf skip the solve."""
     lf = _Leaf(data, leaf, ray, m)
+    m = m & ~_one_sign(lf.Gb, lf.tol)
+    if m:
+        best_s, best_u, best_seg = _solve_body(lf, ray, best_s, best_u, best_seg, m)
+    return best_s, best_u, best_seg
+
+
+@dr.syntax
+def _solve_body(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
+    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
     # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
     # first and second differences of those of F, with errors below 2 tol
     # and 4 tol.
