@@ -510,8 +510,6 @@ class _Ray(LatheRay):
         self.s_star = dr.select(horiz, -b / a, 0.0)
         self.r0sq = dr.select(horiz, self.cross * self.cross / a, c)
         self.zc = dr.fma(self.d.z, self.s_star, self.o.z)  # z* = z at the closest approach
-        self.vertical = ~horiz                # parallel to the axis
-        self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
 
     def reaches(self, lo, hi, r2):
         """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
@@ -523,12 +521,19 @@ class _Ray(LatheRay):
 
 def _box_enter(ray: _Ray, box, best, active):
     """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
-    within (s_lo, best)."""
-    # r(s)^2 = a (s - s*)^2 + r0^2 <= rmax^2: symmetric about s*.
-    disc = dr.fma(box.x, box.x, -ray.r0sq)
-    h = dr.select(ray.vertical, dr.inf, dr.sqrt(dr.maximum(disc, 0.0) * ray.inv_a))
-    return active & (disc >= 0) & common.enter_annular_box(ray, box.z, box.w, ray.s_star - h,
-                                                     ray.s_star + h, box.y, best)
+    within (s_lo, best): on the part [lo, hi] of that interval within the
+    box's z slab, ``r(s)^2`` (continuous and convex) takes every value
+    between its least, at ``s*`` clipped to [lo, hi], and its largest, at an
+    end; the box is met iff the first is at most ``rmax^2`` and the second at
+    least ``rmin^2`` (no square root, unlike the interval where ``r <=
+    rmax``)."""
+    zl = (box.z - ray.o.z) * ray.inv_dz
+    zh = (box.w - ray.o.z) * ray.inv_dz
+    lo = dr.maximum(dr.minimum(zl, zh), ray.s_lo)
+    hi = dr.minimum(dr.maximum(zl, zh), best)
+    e = dr.clip(ray.s_star, lo, hi) - ray.s_star
+    inner = dr.fma(ray.a, e * e, ray.r0sq) <= box.x * box.x
+    return active & (lo <= hi) & inner & ray.reaches(lo, hi, box.y)
 
 
 def _bezier_square(p: list) -> list:
