@@ -12,11 +12,15 @@ ray sets, each ``--rays`` rays, in the lathe's local frame:
 * ``inside``: rays from random points of the bounding cylinder in random
   directions.
 
-Each kernel is compiled first, then timed (``dr.eval`` + ``dr.sync_thread``,
-best of ``--repeat``). ``--module PATH`` loads another version of
-``lathe_shape/kernels/bspline.py`` for a before/after comparison.
+Each kernel is compiled first, then all are timed in turn (``dr.eval`` +
+``dr.sync_thread``), ``--repeat`` rounds; the table gives the median and
+the min-max. ``--module PATH`` loads another version of
+``lathe_shape/kernels/bspline.py``; ``--baseline PATH`` times a second one
+interleaved with it (before/after in one run). ``--threads 1`` times CPU
+time on one Dr.Jit thread: on a shared machine far steadier than wall time.
 
-    python scripts/bench_bspline_kernel.py [--rays 1000000] [--repeat 3]
+    python scripts/bench_bspline_kernel.py [--rays 1000000] [--repeat 5] [--threads 1]
+                                           [--module PATH] [--baseline PATH]
 """
 
 from __future__ import annotations
@@ -36,12 +40,14 @@ from lathe_shape.profiles.polyline import make_profile
 from lathe_shape.tools.reference import SPLINE_GLASS
 
 
-def load_kernel(path: str | None):
-    """The B-spline kernel module: the package's, or the file ``path``."""
+def load_kernel(path: str | None, name: str = "_bench_alt"):
+    """The B-spline kernel module: the package's, or the file ``path``
+    (loaded as ``lathe_shape.kernels.<name>``, so its relative imports
+    resolve)."""
     if path is None:
         from lathe_shape.kernels import bspline
         return bspline
-    spec = importlib.util.spec_from_file_location("lathe_shape.kernels._bench_alt", path)
+    spec = importlib.util.spec_from_file_location(f"lathe_shape.kernels.{name}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -95,68 +101,100 @@ def inside_rays(seg: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
     return org, d
 
 
-def time_kernel(fn, o, d, repeat: int) -> tuple[float, float]:
-    """Best wall time of ``fn(o, d)`` and its hit fraction."""
-    def run():
-        res = fn(o, d)
-        dr.eval(res)
-        dr.sync_thread()
-        return res
+def run_kernel(fn, o, d, clock) -> tuple[float, object]:
+    """One timed evaluation of ``fn(o, d)``: ``(seconds, result)``."""
+    t0 = clock()
+    res = fn(o, d)
+    dr.eval(res)
+    dr.sync_thread()
+    return clock() - t0, res
 
-    res = run()  # compile (or load from the kernel cache)
-    best = float("inf")
+
+def interleaved_times(kernels: dict, o, d, repeat: int, clock) -> dict:
+    """``repeat`` times of every kernel, run in turn (A B C A B C ...) so that
+    a change in the machine's load affects all alike; each is first run once
+    (compilation, or a load from the kernel cache). Returns ``{name:
+    (times, hit fraction)}``."""
+    hits = {}
+    for name, fn in kernels.items():
+        res = run_kernel(fn, o, d, clock)[1]
+        valid = res if isinstance(res, mi.Bool) else res.valid
+        hits[name] = float(np.mean(np.array(valid)))
+    times: dict = {name: [] for name in kernels}
     for _ in range(repeat):
-        t0 = time.perf_counter()
-        res = run()
-        best = min(best, time.perf_counter() - t0)
-    valid = res if isinstance(res, mi.Bool) else res.valid
-    return best, float(np.mean(np.array(valid)))
+        for name, fn in kernels.items():
+            times[name].append(run_kernel(fn, o, d, clock)[0])
+    return {name: (times[name], hits[name]) for name in kernels}
+
+
+def kernel_table(K, bdata, pdata, baseline=None) -> dict:
+    """The timed kernels: the B-spline kernel of module ``K`` (and, given
+    ``baseline = (module, data)``, that one's as well) and the polyline's,
+    nearest hit and shadow ray."""
+    inf, on = mi.Float(dr.inf), mi.Bool(True)
+    kernels = {"bspline": lambda o, d: K.intersect_bspline(bdata, o, d, inf, on)}
+    if baseline:
+        kernels["baseline"] = lambda o, d: baseline[0].intersect_bspline(baseline[1], o, d, inf, on)
+    kernels["polyline31"] = lambda o, d: P.intersect_polyline(pdata, o, d, inf, on)
+    kernels["bspline occl."] = lambda o, d: K.occluded_bspline(bdata, o, d, inf, on)
+    if baseline:
+        kernels["baseline occl."] = lambda o, d: baseline[0].occluded_bspline(baseline[1], o, d, inf, on)
+    kernels["polyline31 occl."] = lambda o, d: P.occluded_polyline(pdata, o, d, inf, on)
+    return kernels
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rays", type=int, default=1_000_000)
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--module", default=None, help="alternative bspline kernel file")
+    parser.add_argument("--baseline", default=None,
+                        help="a second bspline kernel file, timed interleaved with the first")
+    parser.add_argument("--threads", type=int, default=0,
+                        help="Dr.Jit worker threads (0: default); with 1, times are CPU times")
     parser.add_argument("--sets", default="camera,surface,inside")
     args = parser.parse_args()
     mi.set_variant(args.variant)
+    if args.threads:
+        dr.set_thread_count(args.threads)
+    # One thread: the process's CPU time, which the load of other processes
+    # on the machine disturbs much less than the wall time.
+    clock = time.process_time if args.threads == 1 else time.perf_counter
     K = load_kernel(args.module)
     spline = make_bspline_profile(SPLINE_GLASS, "spline glass")
     seg = spline.segment_controls
     bdata = K.build_bspline_data(seg)
+    baseline = None
+    if args.baseline:
+        base_module = load_kernel(args.baseline, "_bench_baseline")
+        baseline = (base_module, base_module.build_bspline_data(seg))
     prof = make_profile(to_polyline(seg, 32, "adaptive"), source="adaptive polyline")
     pdata = P.profile_polyline_data(prof, smooth=True)
     rng = np.random.default_rng(0)
     makers = {"camera": lambda: camera_rays(seg, args.rays),
               "surface": lambda: surface_rays(seg, args.rays, rng),
               "inside": lambda: inside_rays(seg, args.rays, rng)}
-    kernels = {
-        "bspline": lambda o, d: K.intersect_bspline(bdata, o, d, mi.Float(dr.inf), mi.Bool(True)),
-        "polyline31": lambda o, d: P.intersect_polyline(pdata, o, d, mi.Float(dr.inf), mi.Bool(True)),
-        "bspline occl.": lambda o, d: K.occluded_bspline(bdata, o, d, mi.Float(dr.inf), mi.Bool(True)),
-        "polyline31 occl.": lambda o, d: P.occluded_polyline(pdata, o, d, mi.Float(dr.inf),
-                                                            mi.Bool(True)),
-    }
-    print(f"{args.variant}, {args.rays} rays per set, best of {args.repeat}; "
-          f"spline of {len(seg)} segments, polyline of {prof.segment_count}; "
-          f"kernel {args.module or 'lathe_shape/kernels/bspline.py'}")
-    print(f"{'rays':<10}{'kernel':<18}{'time [ms]':>10}{'Mrays/s':>9}{'hits':>7}{'ratio':>8}")
+    kernels = kernel_table(K, bdata, pdata, baseline)
+    print(f"{args.variant}, {args.rays} rays per set, median (min-max) of {args.repeat} interleaved "
+          f"runs ({'CPU' if clock is time.process_time else 'wall'} time); spline of {len(seg)} segments, "
+          f"polyline of {prof.segment_count}; kernel {args.module or 'lathe_shape/kernels/bspline.py'}"
+          + (f", baseline {args.baseline}" if args.baseline else ""))
+    print(f"{'rays':<10}{'kernel':<18}{'time [ms]':>22}{'Mrays/s':>9}{'hits':>7}{'bspline/this':>14}")
     for name in args.sets.split(","):
         org, d = makers[name]()
         o = mi.Point3f(org.T.astype(np.float32))
         dj = mi.Vector3f(d.T.astype(np.float32))
         dr.eval(o, dj)
-        times = {}
-        for kname, fn in kernels.items():
-            t, hits = time_kernel(fn, o, dj, args.repeat)
-            times[kname] = t
-            # bspline / polyline time, on the polyline rows
-            ratio = f"{times[kname.replace('polyline31', 'bspline')] / t:7.2f}x" \
-                if kname.startswith("polyline") else ""
-            print(f"{name:<10}{kname:<18}{t * 1e3:>10.1f}{len(org) / t / 1e6:>9.2f}{hits:>7.3f}"
-                  f"{ratio:>8}", flush=True)
+        results = interleaved_times(kernels, o, dj, args.repeat, clock)
+        medians = {k: float(np.median(t)) for k, (t, _) in results.items()}
+        for kname, (times, hits) in results.items():
+            t = medians[kname]
+            ours = medians["bspline occl." if kname.endswith("occl.") else "bspline"]
+            ratio = "" if kname.startswith("bspline") else f"{ours / t:13.3f}x"
+            spread = f"{t * 1e3:.1f} ({min(times) * 1e3:.1f}-{max(times) * 1e3:.1f})"
+            print(f"{name:<10}{kname:<18}{spread:>22}{len(org) / t / 1e6:>9.2f}{hits:>7.3f}{ratio:>14}",
+                  flush=True)
 
 
 if __name__ == "__main__":

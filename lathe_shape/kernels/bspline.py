@@ -62,9 +62,10 @@ Bernstein coefficients of ``F`` directly, and when all exceed the float32
 error bound ``tol`` in magnitude with one sign (convex hull property), ``F``
 has no root, not even a grazing one, on the leaf. Only the leaves that pass
 (usually the few that the ray really crosses) are solved: an inner loop walks
-the tree to the next such leaf, so all lanes of a SIMD packet solve together
-(the Bernstein test itself is skipped by packets with no lane at an entered
-leaf).
+the tree to the next entered leaf, so all lanes of a SIMD packet test and
+solve together; the Bernstein test runs there, outside the walk (a walk
+step with it is much slower, although a packet without a lane at a leaf
+skips it), and a packet with no lane that passes skips the solve.
 
 Root finding on a leaf (after C. Yuksel, "High-Performance Polynomial Root
 Finding for Graphics", HPG 2022): the roots of ``F'`` split [0, 1] into
@@ -83,7 +84,10 @@ bracketed root is found by safeguarded Newton steps (bisection when a step
 leaves the bracket or converges slowly; the answer is the evaluated point
 with the least ``|F|``), so no root with a sign change can be missed; the
 iteration count only limits precision; the steps run in a symbolic loop
-that ends once all lanes of a packet converged. A critical point where ``|F|`` is
+that ends once all lanes of a packet converged. The searches of one level
+(the brackets between the critical points of one derivative, the intervals
+of ``F``) share one loop, which gives shorter and faster LLVM code than a
+loop per bracket, with the same results. A critical point where ``|F|`` is
 below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision: in float32 the coefficients of ``F`` would lose most of their
@@ -99,6 +103,7 @@ thresholds below are relative to the profile whatever the user's units.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -136,8 +141,8 @@ _STRIDE = 8
 #: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
 #: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
 #: the leaf's parameter u), then (t0, h, segment, r_squared): the last is 1
-#: where the R slots hold R^2 (the sor kind; the kernel reads the Python flag
-#: ``BSplineData.r_squared``, this copy serves data that mixes kinds).
+#: where the R slots hold R^2 (the sor kind; the kernel reads the flag from
+#: ``BSplineData``, see :func:`_squared`).
 _LEAF_STRIDE = 20
 
 #: Longest leaf, in segment parameter t (before padding).
@@ -182,6 +187,9 @@ class BSplineData(LatheData):
         n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
         r_squared: Python bool, True when the ``R`` slots hold ``R^2`` (the
             ``sor`` kind, :func:`build_cubic_data`); chosen when tracing.
+        r_squared_flag: the same as an opaque ``mi.UInt32`` (0 or 1): a view
+            of several profiles' data (kernels/top_level.py) gathers it per
+            lane, so that one kernel serves profiles of both forms.
         bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
             cylinder of the whole curve (the union of the leaf boxes).
         scale, inv_scale, z_shift: the unit frame (kernels/common.py), in
@@ -318,6 +326,7 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
         n_seg_host=n_seg,
         n_leaf_host=len(leaves),
         r_squared=r_squared,
+        r_squared_flag=opaque(int(r_squared), mi.UInt32),
         bound_r=opaque(float(boxes[:, 1].max())),
         bound_z_lo=opaque(float(boxes[:, 2].min())),
         bound_z_hi=opaque(float(boxes[:, 3].max())),
@@ -328,6 +337,29 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
 # ---------------------------------------------------------------------------
 # Polynomial helpers (unrolled per degree, vectorized over lanes)
 # ---------------------------------------------------------------------------
+
+def _squared(data: LatheData):
+    """Whether the ``R`` slots of ``data`` hold ``R^2`` (the sor kind, eq.
+    20): the Python bool of one lathe's own :class:`BSplineData`, so that
+    its kernel is specialised to one form; else (a view of several profiles'
+    data, kernels/top_level.py, which has no such bool) a per-lane mask
+    from the profile's ``r_squared_flag``."""
+    flag = getattr(data, "r_squared", None)
+    return flag if isinstance(flag, bool) else data.r_squared_flag != 0
+
+
+def _by_form(squared, of_square: Callable, of_radius: Callable, *args):
+    """``of_square(*args)`` where ``squared`` (see :func:`_squared`), else
+    ``of_radius(*args)``: only the one needed for a Python bool, both
+    selected per lane for a mask. The callables return a value or a
+    tuple/list."""
+    if isinstance(squared, bool):
+        return of_square(*args) if squared else of_radius(*args)
+    a, b = of_square(*args), of_radius(*args)
+    if isinstance(a, (list, tuple)):
+        return type(a)(dr.select(squared, x, y) for x, y in zip(a, b, strict=True))
+    return dr.select(squared, a, b)
+
 
 def _polyval(c: list, x):
     """Horner evaluation of ascending coefficients ``c`` at ``x``."""
@@ -358,7 +390,6 @@ def _polymul(p: list, q: list) -> list:
     return out
 
 
-@dr.syntax
 def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     """Root of the polynomial ``c`` (derivative ``dc``) on [x0, x1], where it
     is monotonic; ``f0``, ``f1`` are its values at the ends.
@@ -375,42 +406,69 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     ``x`` is ``x1`` (this keeps the list of critical points sorted for the
     next level).
     """
-    found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
-    neg0 = f0 < 0
-    a = mi.Float(x0)                   # bracket [a, b]; f(a) has the sign of f0
-    b = mi.Float(x1)
-    x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
-    x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
-    dx_old = b - a                     # step before last
-    dx = mi.Float(dx_old)              # last step
-    done = ~found                      # converged (or nothing to find)
-    best_x = mi.Float(x)               # evaluated point with the least |f|
-    best_f = mi.Float(dr.inf)          # its |f|
-    k = mi.UInt32(0)                   # steps taken
-    while ~done & (k < steps):
-        f, df = _polyval_d(c, x)
-        # Near the root f is float32 noise, and the steps below may then
-        # bisect away from it; the least |f| seen is the answer.
-        better = dr.abs(f) < best_f
-        best_x = dr.select(better, x, best_x)
-        best_f = dr.select(better, dr.abs(f), best_f)
-        left = (f < 0) == neg0
-        a = dr.select(left, x, a)
-        b = dr.select(left, b, x)
-        # Converged: an exact zero, or a Newton step below float32
-        # resolution of t (checked first: the test below would then pick
-        # bisection and jump away from the root).
-        done |= (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
-        # Newton unless it leaves [a, b] or converges slower than bisection.
-        xn = x - f / df
-        newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
-        dx_old = dx
-        x_new = dr.select(newton, xn, 0.5 * (a + b))
-        dx = x_new - x
-        x = dr.select(done, x, x_new)
-        k += 1
-    x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, best_x))
-    return dr.select(found, x, x1), found
+    return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
+
+
+def _bracket_roots(c: list, dc: list, brackets: list, steps: int) -> list:
+    """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
+    of one polynomial at once (``mask``: lanes that search it, ``None``:
+    all), in one symbolic loop: every bracket takes the same steps as on its
+    own (a converged bracket's point stays put), so the results are the
+    same, and a kernel holds one loop instead of one per bracket (fewer
+    loops make faster LLVM code, even where they seldom run)."""
+    state, starts = [], []
+    for x0, x1, f0, f1, mask in brackets:
+        found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
+        if mask is not None:
+            found &= mask
+        a, b = mi.Float(x0), mi.Float(x1)  # bracket [a, b]; f(a) has the sign of f0
+        x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
+        x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
+        # (a, b, x, step before last, last step, converged or nothing to
+        # find, evaluated point with the least |f|, its |f|)
+        state.append((a, b, x, b - a, b - a, ~found, mi.Float(x), mi.Float(dr.inf)))
+        starts.append((found, f0 < 0))
+
+    def pending(k, state):
+        todo = ~state[0][5]
+        for bracket in state[1:]:
+            todo |= ~bracket[5]
+        return todo & (k < steps)
+
+    def step(k, state):
+        return k + 1, [_newton_step(c, dc, bracket, neg0)
+                       for bracket, (_, neg0) in zip(state, starts, strict=True)]
+
+    _, state = dr.while_loop((mi.UInt32(0), state), pending, step)
+    out = []
+    for (x0, x1, f0, f1, _), (found, _), bracket in zip(brackets, starts, state, strict=True):
+        x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, bracket[6]))
+        out.append((dr.select(found, x, x1), found))
+    return out
+
+
+def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
+    """One safeguarded Newton step of :func:`_bracket_roots` on one bracket
+    state (the order of its fields is documented there)."""
+    a, b, x, dx_old, dx, done, best_x, best_f = bracket
+    f, df = _polyval_d(c, x)
+    # Near the root f is float32 noise, and the steps below may then
+    # bisect away from it; the least |f| seen is the answer.
+    better = dr.abs(f) < best_f
+    best_x = dr.select(better, x, best_x)
+    best_f = dr.select(better, dr.abs(f), best_f)
+    left = (f < 0) == neg0
+    a = dr.select(left, x, a)
+    b = dr.select(left, b, x)
+    # Converged: an exact zero, or a Newton step below float32 resolution of
+    # t (checked first: the test below would then pick bisection and jump
+    # away from the root).
+    done = done | (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
+    # Newton unless it leaves [a, b] or converges slower than bisection.
+    xn = x - f / df
+    newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
+    x_new = dr.select(newton, xn, 0.5 * (a + b))
+    return a, b, dr.select(done, x, x_new), dx, x_new - x, done, best_x, best_f
 
 
 def _isolate_critical(derivs: list, lo, hi) -> list:
@@ -431,10 +489,8 @@ def _isolate_critical(derivs: list, lo, hi) -> list:
         dc = derivs[level + 1]
         xs = [lo] + crit + [hi]
         fs = [_polyval(c, xk) for xk in xs]
-        crit = []
-        for j in range(len(xs) - 1):
-            r, _ = _bracket_root(c, dc, xs[j], xs[j + 1], fs[j], fs[j + 1], _STEPS_CRIT)
-            crit.append(r)
+        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
+        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
     return crit
 
 
@@ -454,8 +510,6 @@ class _Ray(LatheRay):
         self.s_star = dr.select(horiz, -b / a, 0.0)
         self.r0sq = dr.select(horiz, self.cross * self.cross / a, c)
         self.zc = dr.fma(self.d.z, self.s_star, self.o.z)  # z* = z at the closest approach
-        self.vertical = ~horiz                # parallel to the axis
-        self.inv_a = dr.rcp(dr.select(self.vertical, 1.0, a))
 
     def reaches(self, lo, hi, r2):
         """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
@@ -467,12 +521,19 @@ class _Ray(LatheRay):
 
 def _box_enter(ray: _Ray, box, best, active):
     """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
-    within (s_lo, best)."""
-    # r(s)^2 = a (s - s*)^2 + r0^2 <= rmax^2: symmetric about s*.
-    disc = dr.fma(box.x, box.x, -ray.r0sq)
-    h = dr.select(ray.vertical, dr.inf, dr.sqrt(dr.maximum(disc, 0.0) * ray.inv_a))
-    return active & (disc >= 0) & common.enter_annular_box(ray, box.z, box.w, ray.s_star - h,
-                                                     ray.s_star + h, box.y, best)
+    within (s_lo, best): on the part [lo, hi] of that interval within the
+    box's z slab, ``r(s)^2`` (continuous and convex) takes every value
+    between its least, at ``s*`` clipped to [lo, hi], and its largest, at an
+    end; the box is met iff the first is at most ``rmax^2`` and the second at
+    least ``rmin^2`` (no square root, unlike the interval where ``r <=
+    rmax``)."""
+    zl = (box.z - ray.o.z) * ray.inv_dz
+    zh = (box.w - ray.o.z) * ray.inv_dz
+    lo = dr.maximum(dr.minimum(zl, zh), ray.s_lo)
+    hi = dr.minimum(dr.maximum(zl, zh), best)
+    e = dr.clip(ray.s_star, lo, hi) - ray.s_star
+    inner = dr.fma(ray.a, e * e, ray.r0sq) <= box.x * box.x
+    return active & (lo <= hi) & inner & ray.reaches(lo, hi, box.y)
 
 
 def _bezier_square(p: list) -> list:
@@ -493,22 +554,26 @@ def _bezier_elevate(p: list) -> list:
             (p[2] + p[3]) * 0.5, p[3]]
 
 
-def _hull(Rb, Zb, ray: _Ray, r_squared: bool = False):
+def _hull(Rb, Zb, ray: _Ray, squared=False):
     """Bernstein coefficients of ``F`` (eqs. 13-15, in the form of the module
     docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
-    float32 error of ``F`` and of these coefficients there. ``r_squared``:
-    ``Rb`` holds ``R^2`` itself (eq. 20), not ``R``."""
+    float32 error of ``F`` and of these coefficients there. ``squared`` (a
+    bool or a mask, :func:`_squared`): ``Rb`` holds ``R^2`` itself (eq. 20),
+    not ``R``."""
     W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
     R = [Rb.x, Rb.y, Rb.z, Rb.w]
     W2 = _bezier_square(W)
-    R2 = _bezier_elevate(R) if r_squared else _bezier_square(R)
+    R2 = _by_form(squared, lambda: _bezier_elevate(R), lambda: _bezier_square(R))
     k2 = ray.d.z * ray.d.z
     G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
-    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull).
+    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull); the bound on R^2.
     mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
-    Rm = [dr.abs(x) for x in R] if r_squared else R
-    mr = dr.maximum(dr.maximum(Rm[0], Rm[1]), dr.maximum(Rm[2], Rm[3]))
-    bound = dr.fma(ray.a, mw * mw, k2 * ((mr if r_squared else mr * mr) + ray.r0sq))
+
+    def largest(v):
+        return dr.maximum(dr.maximum(v[0], v[1]), dr.maximum(v[2], v[3]))
+
+    mr = _by_form(squared, lambda: largest([dr.abs(x) for x in R]), lambda: largest(R))
+    bound = dr.fma(ray.a, mw * mw, k2 * (_by_form(squared, lambda: mr, lambda: mr * mr) + ray.r0sq))
     return G, _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
 
 
@@ -521,22 +586,14 @@ def _one_sign(c: list, tol):
     return (lo > tol) | (hi < -tol)
 
 
-@dr.syntax
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
     """One traversal step: ``(candidate, next node)``. A candidate is a leaf
-    whose box the ray enters before ``best`` and whose Bernstein hull of
-    ``F`` does not exclude a root (or a grazing contact)."""
+    whose box the ray enters before ``best`` (:func:`_solve_leaf` tests its
+    Bernstein hull)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
     link, is_leaf, leaf = common.bvh_link(data.links, node, active)
     enter = _box_enter(ray, box, best, active)
-    m = enter & is_leaf
-    cand = mi.Bool(False)  # an entered leaf that F may cross or touch
-    if m:
-        base = leaf * (_LEAF_STRIDE // 4)
-        Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
-        Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        G, tol = _hull(Rb, Zb, ray, data.r_squared)
-        cand = m & ~_one_sign(G, tol)
+    cand = enter & is_leaf
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
     nxt = dr.select(cand, node, common.bvh_next(node, link, is_leaf, enter))
@@ -561,25 +618,34 @@ class _Leaf:
         self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
-        self.r_squared = data.r_squared  # R holds R^2 (eq. 20)
-        self.Gb, self.tol = _hull(Rb, Zb, ray, data.r_squared)
+        self.squared = _squared(data)  # R holds R^2 (eq. 20)
+        self.Gb, self.tol = _hull(Rb, Zb, ray, self.squared)
         # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 13-15, times d_z^2)
         W = [self.Z[0] - ray.zc] + self.Z[1:]
         W2 = _polymul(W, W)
-        R2 = self.R + [mi.Float(0.0)] * 3 if self.r_squared else _polymul(self.R, self.R)
+        R2 = _by_form(self.squared, lambda: self.R + [mi.Float(0.0)] * 3,
+                      lambda: _polymul(self.R, self.R))
         R2[0] = R2[0] - ray.r0sq
         k2 = ray.d.z * ray.d.z
         self.F = [dr.fma(ray.a, W2[k], -k2 * R2[k]) for k in range(7)]
         self.dF = _polyder(self.F)
 
 
-def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_seg, m):
+def _interval_roots(lf: _Leaf, intervals: list) -> list:
+    """The roots ``(u, found)`` of ``F`` on the intervals ``(x0, x1, f0, f1,
+    mask)`` where it is monotonic (values ``f0``, ``f1`` at the ends), for
+    :func:`_take_interval`: one loop for all (:func:`_bracket_roots`)."""
+    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT)
+
+
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best_s, best_u, best_seg, m):
     """The root of ``F`` on [x0, x1], where it is monotonic (values ``f0``,
-    ``f1`` at the ends), or a tangent root at an end; updates the nearest
-    hit. See the module docstring for the choice of ``s``."""
+    ``f1`` at the ends; ``root``: from :func:`_interval_roots`), or a
+    tangent root at an end; updates the nearest hit. See the module
+    docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
-    u, found = _bracket_root(lf.F, lf.dF, x0, x1, f0, f1, _STEPS_ROOT)
+    u, found = root
     # No sign change: a tangent (double) root at the endpoint with the
     # smaller |F|, if that is within float32 noise of 0.
     fmin = dr.minimum(dr.abs(f0), dr.abs(f1))
@@ -587,7 +653,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, best_s, best_u, best_se
     tangent = ~found & (fmin <= tol)
     u = dr.select(found, u, dr.select(near0, x0, x1))
     Rt = _polyval(lf.R, u)
-    R2t = Rt if lf.r_squared else Rt * Rt  # R(t)^2
+    R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
     Zt = _polyval(lf.Z, u)
     # A real hit has R(t) >= the ray's distance r0 from the axis. For
     # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
@@ -631,16 +697,27 @@ def _solve_chain(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
         derivs.append(_polyder(derivs[-1]))
     xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
     fs = [_polyval(lf.F, x) for x in xs]
-    for j in range(len(xs) - 1):
-        best_s, best_u, best_seg = _take_interval(lf, ray, xs[j], xs[j + 1], fs[j], fs[j + 1],
-                                                  best_s, best_u, best_seg, m)
+    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
+    for interval, root in zip(intervals, _interval_roots(lf, intervals), strict=True):
+        best_s, best_u, best_seg = _take_interval(lf, ray, *interval[:4], root, best_s, best_u, best_seg, m)
     return best_s, best_u, best_seg
 
 
 @dr.syntax
 def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m):
-    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit."""
+    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit.
+    Lanes where the Bernstein hull of ``F`` excludes a root (or a grazing
+    contact) on the leaf skip the solve."""
     lf = _Leaf(data, leaf, ray, m)
+    m = m & ~_one_sign(lf.Gb, lf.tol)
+    if m:
+        best_s, best_u, best_seg = _solve_body(lf, ray, best_s, best_u, best_seg, m)
+    return best_s, best_u, best_seg
+
+
+@dr.syntax
+def _solve_body(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
+    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
     # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
     # first and second differences of those of F, with errors below 2 tol
     # and 4 tol.
@@ -661,11 +738,13 @@ def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m)
         c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
                              sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
         f_c = _polyval(lf.F, c)
-    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c,
+    f_1 = sum(lf.F[1:], lf.F[0])  # F(1)
+    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.F[0], f_c, fast),
+                                         (c, mi.Float(1.0), f_c, f_1, split)])
+    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c, first,
                                               best_s, best_u, best_seg, fast)
     if split:
-        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c,
-                                                  sum(lf.F[1:], lf.F[0]),
+        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c, f_1, second,
                                                   best_s, best_u, best_seg, split)
     slow = m & ~simple
     if slow:
@@ -715,11 +794,12 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     R = [dr.gather(mi.Float, data.seg, base + k, active) for k in range(4)]
     Z = [dr.gather(mi.Float, data.seg, base + 4 + k, active) for k in range(4)]
     o, dh = ray.o, ray.d
+    squared = _squared(data)
     for _ in range(_STEPS_POLISH):
         Rt, dR = _polyval_d(R, t)
         Zt, dZ = _polyval_d(Z, t)
         # R(t)^2 and its derivative 2 R R' (the sor kind stores R^2 itself)
-        R2t, dR2 = (Rt, dR) if data.r_squared else (Rt * Rt, 2.0 * Rt * dR)
+        R2t, dR2 = _by_form(squared, lambda r, dr_: (r, dr_), lambda r, dr_: (r * r, 2.0 * r * dr_), Rt, dR)
         qx = dr.fma(dh.x, s, o.x)
         qy = dr.fma(dh.y, s, o.y)
         g1 = dr.fma(dh.z, s, o.z) - Zt
@@ -775,13 +855,14 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
     tan_r, tan_z = dR, dZ
-    if data.r_squared:
+    squared = _squared(data)
+    if squared is not False:
         # R holds R^2 (eq. 20): the tangent (R', Z') = ((R^2)' / 2R, Z') is
         # parallel to ((R^2)', 2 R Z'), finite on the axis too.
         radius = dr.sqrt(dr.maximum(Rt, 0.0))
-        tan_r, tan_z = dR, 2.0 * radius * dZ
-        dR = dR * dr.rcp(2.0 * dr.maximum(radius, 1e-6))
-        Rt = radius
+        tan_z, dR, Rt = _by_form(squared, lambda: (2.0 * radius * dZ,
+                                                   dR * dr.rcp(2.0 * dr.maximum(radius, 1e-6)), radius),
+                                 lambda: (tan_z, dR, Rt))
     chord_r = R[1] + R[2] + R[3]
     chord_z = Z[1] + Z[2] + Z[3]
     speed2 = dr.fma(tan_r, tan_r, tan_z * tan_z)

@@ -100,11 +100,14 @@ KINDS = {
     "polyline": KindLayout(8, {"seg_geo": 4, "seg_sh": 4, "seg_arc": 2, "seg_side": 8}, {}, True, None,
                            _FRAME + ("tol",), polyline.intersect_polyline, polyline.occluded_polyline,
                            _polyline_geometry),
-    # A B-spline leaf record ends with (t0, h, segment, 0): see kernels/bspline.py.
+    # A B-spline leaf record ends with (t0, h, segment, r_squared): see kernels/bspline.py.
+    # The per-profile r_squared_flag lets one kernel serve R and R^2 (sor) profiles.
     "bspline": KindLayout(4, {"seg": bspline._STRIDE}, {"leaf": bspline._LEAF_STRIDE}, False,
-                          bspline._LEAF_STRIDE - 2, _FRAME + ("n_seg",), bspline.intersect_bspline,
-                          bspline.occluded_bspline, _bspline_geometry),
+                          bspline._LEAF_STRIDE - 2, _FRAME + ("n_seg", "r_squared_flag"),
+                          bspline.intersect_bspline, bspline.occluded_bspline, _bspline_geometry),
 }
+# The other cubic kinds (surfaces.py) run the B-spline kernel on its data.
+KINDS.update({kind: KINDS["bspline"] for kind in ("bezier", "catmull_rom", "quadratic", "sor")})
 
 
 def _host(value) -> np.ndarray:
