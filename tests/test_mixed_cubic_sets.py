@@ -76,8 +76,8 @@ def test_one_set_mixes_r_and_r_squared_profiles():
 
 
 def test_scene_of_sor_and_bezier_lathes():
-    """A scene groups lathes by kind: two sor and two Bezier lathes make two
-    sets, each agreeing with the lathes' own kernels."""
+    """A scene groups lathes by kernel: two sor and two Bezier lathes make
+    one set of the B-spline kernel, agreeing with the lathes' own kernels."""
     scene: dict = {"type": "scene"}
     for i, (kind, text, open_sheet) in enumerate([CURVES[0], CURVES[2], CURVES[3], CURVES[3]]):
         scene[f"lathe_{i}"] = {"type": "lathe", "kind": kind, "profile": text, "open": open_sheet,
@@ -85,7 +85,9 @@ def test_scene_of_sor_and_bezier_lathes():
                                "to_world": mi.ScalarTransform4f().translate([4.0 * i, 0, 0])}
     scene = mi.load_dict(scene)
     geometry = ExactSceneGeometry(scene)
-    assert sorted(g.lathes[0].surface.kind for g in geometry.groups) == ["bezier", "sor"]
+    kinds = [sorted({lathe.surface.kind for lathe in g.lathes}) for g in geometry.groups]
+    assert kinds == [["bezier", "sor"]]
+    assert not geometry.single
     box = scene.bbox()
     o, d = _rays(20000, np.array(box.min), np.array(box.max), seed=4)
     ray = mi.Ray3f(mi.Point3f(*o), mi.Vector3f(*d))

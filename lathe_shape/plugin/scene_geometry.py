@@ -35,7 +35,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.common import opaque
-from ..kernels.top_level import LatheSet, ProfileTable
+from ..kernels.top_level import KINDS, LatheSet, ProfileTable
 from .interaction import lathe_interaction
 from .shape import LatheShape, scene_lathes
 
@@ -53,9 +53,11 @@ class ExactSceneGeometry:
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = scene_lathes(scene)
         others = [s for s in shapes if not isinstance(s, LatheShape)]
-        by_kind: dict[str, list[LatheShape]] = {}
+        by_kind: dict[object, list[LatheShape]] = {}
         for lathe in self.lathes:
-            by_kind.setdefault(lathe.surface.kind, []).append(lathe)
+            # Kinds of one kernel layout (the B-spline kernel's cubic kinds)
+            # share a set.
+            by_kind.setdefault(id(KINDS[lathe.surface.kind]), []).append(lathe)
         #: Lathes intersected by their own kernel (the only one of their kind).
         self.single = [group[0] for group in by_kind.values() if len(group) == 1]
         #: Kinds of several lathes, each intersected as one set.
