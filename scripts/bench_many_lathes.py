@@ -31,21 +31,26 @@ ROOT = Path(__file__).resolve().parents[1]
 PROFILE = ROOT / "scenes" / "wine_glass.csv"
 
 
-def glass_text(i: int, reference: str, buried: bool) -> str:
+def glass_text(i: int, reference: str, buried: bool, shared: bool = True) -> str:
     """Glass ``i`` of the grid: 32 to a row, 12 units apart; ``buried``: 8
-    rows, and the glasses after the 256th 100 units under the floor."""
+    rows, and the glasses after the 256th 100 units under the floor;
+    ``shared``: the glass material is one BSDF referenced by every glass
+    (else each glass has its own)."""
+    bsdf = '<ref id="glass"/>' if shared else '<bsdf type="dielectric"/>'
+
     x, row = (i % 32) * 12 - 186, i // 32
     y, z = (row % 8 * 12, -100 * (i // 256)) if buried else (row * 12, 0)
     return (f'<shape type="lathe" id="glass_{i}"><string name="filename" value="{PROFILE}"/>'
             f'<string name="reference" value="{reference}"/><integer name="mesh_segments" value="512"/>'
             f'<transform name="to_world"><translate x="{x}" y="{y}" z="{z}"/></transform>'
-            '<bsdf type="dielectric"/></shape>')
+            f'{bsdf}</shape>')
 
 
-def scene_text(count: int, reference: str, width: int, height: int, buried: bool = False) -> str:
+def scene_text(count: int, reference: str, width: int, height: int, buried: bool = False,
+               shared: bool = True) -> str:
     """A grid of ``count`` glasses (:func:`glass_text`; ``buried``: the image
     of 256 glasses at the cost of ``count`` lathes) on a floor."""
-    glasses = "\n".join(glass_text(i, reference, buried) for i in range(count))
+    glasses = "\n".join(glass_text(i, reference, buried, shared) for i in range(count))
     return f"""<scene version="3.0.0">
     <sensor type="perspective">
         <transform name="to_world"><lookat origin="0,-80,90" target="0,60,0" up="0,0,1"/></transform>
@@ -53,6 +58,7 @@ def scene_text(count: int, reference: str, width: int, height: int, buried: bool
             <integer name="width" value="{width}"/><integer name="height" value="{height}"/>
         </film>
     </sensor>
+    <bsdf type="dielectric" id="glass"/>
     <emitter type="constant"/>
     <shape type="rectangle"><transform name="to_world"><scale value="400"/></transform></shape>
     {glasses}
@@ -60,7 +66,7 @@ def scene_text(count: int, reference: str, width: int, height: int, buried: bool
 
 
 def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str,
-            repeats: int, buried: bool = False) -> dict:
+            repeats: int, buried: bool = False, shared: bool = True) -> dict:
     """One case, in this process: load time, first render time, median and
     spread of ``repeats`` further renders, peak RSS."""
     import resource
@@ -72,7 +78,7 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
 
     select_variant(variant)
     start = time.perf_counter()
-    scene = load_string_in(ROOT, scene_text(count, reference, *size, buried))
+    scene = load_string_in(ROOT, scene_text(count, reference, *size, buried, shared))
     load = time.perf_counter() - start
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
     times = []
@@ -96,16 +102,20 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="renders timed after the first (default: 3)")
     parser.add_argument("--buried", action="store_true",
                         help="glasses after the 256th under the floor: the image of 256, the cost of more")
+    parser.add_argument("--own-bsdfs", action="store_true",
+                        help="one dielectric BSDF per glass instead of one shared material (a <ref>): "
+                             "Mitsuba's BSDF calls then dispatch over every instance")
     parser.add_argument("--case", help=argparse.SUPPRESS)  # internal: run one case, print JSON
     args = parser.parse_args()
     size = parse_resolution(args.resolution)
     if args.case:
         count, reference = args.case.split(":")
         print(json.dumps(measure(int(count), reference, size, args.spp, args.variant, args.repeats,
-                                 args.buried)))
+                                 args.buried, not args.own_bsdfs)))
         return
     print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, lathe_path max_depth 6, "
-          f"one process per case{', glasses after the 256th buried' if args.buried else ''}")
+          f"one process per case{', glasses after the 256th buried' if args.buried else ''}, "
+          f"{'a BSDF per glass' if args.own_bsdfs else 'one shared glass BSDF'}")
     print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'compile [s]':>13}"
           f"{'render [s]':>12}{'(min-max)':>14}{'vs 256':>8}")
     for reference in args.references:
@@ -113,7 +123,8 @@ def main() -> None:
         for count in args.counts:
             command = [sys.executable, __file__, "--case", f"{count}:{reference}", "--resolution",
                        args.resolution, "--spp", str(args.spp), "--repeats", str(args.repeats),
-                       "--variant", args.variant] + (["--buried"] if args.buried else [])
+                       "--variant", args.variant] + (["--buried"] if args.buried else []) \
+                + (["--own-bsdfs"] if args.own_bsdfs else [])
             result = subprocess.run(command, capture_output=True, text=True)
             if result.returncode != 0:
                 print(f"{count:>7}{reference:>10}  failed: {result.stderr.strip().splitlines()[-1:]}")
