@@ -82,6 +82,7 @@ __all__ = [
     "profile_polyline_data",
     "intersect_polyline",
     "occluded_polyline",
+    "count_crossings_polyline",
     "polyline_geometry",
 ]
 
@@ -342,8 +343,9 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
            active: mi.Bool):
     """Process one node: box test for inner nodes, segment test for leaves.
 
-    Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
-    whose segment is hit at ``s_hit < s_best``. Each test is a symbolic
+    Returns ``(next_node, s_hit, u_hit, seg, hit, count)``; ``hit`` marks a
+    leaf whose segment is hit at ``s_hit < s_best``, ``count`` its number of
+    crossings there. Each test is a symbolic
     ``if``: a packet whose lanes are all at leaves (or all at inner nodes)
     skips the other one.
     """
@@ -362,11 +364,13 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     s_hit = mi.Float(s1)      # leaf: the nearer root on the segment
     u_hit = mi.Float(0.0)     # ... its fraction along the segment
     hit = mi.Bool(False)      # ... and whether it is a hit before s_best
+    count = mi.UInt32(0)      # ... its number of crossings before s_best
     if leaf:
-        # Half-open joints, see _segment_hit
-        s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, s_best, leaf)
+        # Half-open joints, see _segment_roots
+        s_hit, u_hit, ok, count = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, has_root,
+                                         s_best, leaf)
         hit = leaf & ok
-    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit
+    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit, count
 
 
 def _side_terms(ray: _Ray, r, z):
@@ -410,34 +414,39 @@ def _joint_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool)
 
 
 @dr.syntax
-def _crossing_parity(data: PolylineData, ray: _Ray, seg, n_r, off1, off2, real, tol_u, active):
-    """Whether the ray crosses segment ``seg`` an odd number of
-    times. ``off1``, ``off2``: how far its roots lie off the segment (in
-    ``u``; <= 0: on it); ``real``: whether they are real. Where no root lies within the joint tolerance
-    ``tol_u`` of an end, the roots tell (an annulus, ``n_r = 0``, has one
-    crossing: its double root is no pair); else the sides of the segment's
-    end points, shared with its neighbours (:func:`_joint_sides`). Packets
-    without such a lane skip that work."""
-    odd = dr.select(n_r == 0, off1 <= 0, real & ((off1 <= 0) != (off2 <= 0)))
-    at_joint = active & ((dr.abs(off1) <= tol_u) | (dr.abs(off2) <= tol_u))
-    if at_joint:
-        side_start, side_end = _joint_sides(data, ray, seg, at_joint)
+def _crossing_parity(data: PolylineData, ray: _Ray, seg, has_root, active):
+    """Whether the ray crosses segment ``seg`` an odd number of times: its
+    end points lie on different sides of the ray's surface of revolution
+    (:func:`_joint_sides`). Every segment decides so, never from its roots:
+    the sides of a joint are evaluated bit for bit alike by both segments
+    that meet there, so the parities of all segments add up to an even
+    number of crossings for every line. A ray whose line misses the
+    segment's cone (``has_root`` false, with the tolerance of ``_roots``)
+    crosses it an even number of times; packets without a lane that meets
+    the cone skip the side tests."""
+    odd = mi.Bool(False)
+    test = active & has_root
+    if test:
+        side_start, side_end = _joint_sides(data, ray, seg, test)
         odd = side_start != side_end
     return odd
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s_best, active):
-    """The nearer of the roots ``s1``, ``s2`` that lies on segment ``seg``
-    (leaf record ``(rec0, rec1)``): ``(s, u, found)``, ``u`` the fraction
-    along the segment; ``real``: the roots are real (``disc >= 0``).
+def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root, active):
+    """The crossings of the ray's line with segment ``seg`` (leaf record
+    ``(rec0, rec1)``) among the roots ``s1``, ``s2``: ``(take1, take2, u1,
+    u2)``, ``u`` the fraction along the segment (unclipped); ``real``: the
+    roots are real (``disc >= 0``).
 
     Joints are half-open by construction: the parity of the segment's
-    crossings is fixed first (:func:`_crossing_parity`). Odd: exactly one
-    root is taken, the one nearest the segment (within the joint tolerance,
-    for float32 rounding of ``u``). Even: both roots or none, both within
-    the tolerance and real (a grazing ray that float32 cannot resolve
-    touches nothing). A crossing at a joint thus counts once, on the
-    segment that the shared end point's side gives it."""
+    crossings is fixed first (:func:`_crossing_parity`), and the roots only
+    say which crossings those are. Odd: exactly one root, the one nearest
+    the segment. Even: both roots when both lie on the segment up to the
+    joint tolerance (an annulus, ``n_r = 0``, has a double root: no pair),
+    else none (a grazing ray that float32 cannot resolve touches
+    nothing). A crossing at a joint thus counts once, on the segment that
+    the shared end point's side gives it, and every line crosses the
+    profile an even number of times."""
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
     tol_n = data.tol * n_r * n_r
@@ -455,21 +464,24 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    odd = _crossing_parity(data, ray, seg, n_r, off1, off2, real, tol_u, active)
-    near1, near2 = off1 <= tol_u, off2 <= tol_u  # on the segment, up to tol_u
-    # Even: both roots, when both are on the segment (an annulus, n_r = 0,
-    # has one crossing: its double root is no pair); or, when the ray grazes
-    # the segment towards a joint, the root well inside it alone (its partner
-    # is lost to float32 rounding near the joint, past the tolerance).
-    pair = real & (n_r != 0) & near1 & near2
-    # Odd: the root nearer to the segment.
-    take1 = dr.select(odd, near1 & (off1 <= off2), pair | (real & (off1 <= -tol_u) & ~near2))
-    take2 = dr.select(odd, near2 & (off2 < off1), pair | (real & (off2 <= -tol_u) & ~near1))
+    odd = _crossing_parity(data, ray, seg, has_root, active)
+    pair = real & (n_r != 0) & (off1 <= tol_u) & (off2 <= tol_u)
+    first = off1 <= off2  # odd: s1 is the root nearer to the segment
+    return dr.select(odd, first, pair), dr.select(odd, ~first, pair), u1, u2
+
+
+def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root,
+                 s_best, active):
+    """The nearer crossing of segment ``seg`` (:func:`_segment_roots`) in
+    ``(ray.s_lo, s_best)``: ``(s, u, found, count)``, ``count`` the number
+    of its crossings there."""
+    take1, take2, u1, u2 = _segment_roots(data, ray, seg, rec0, rec1, s1, s2, real, has_root,
+                                          active)
     ok1 = take1 & (s1 > ray.s_lo) & (s1 < s_best)
     ok2 = take2 & (s2 > ray.s_lo) & (s2 < s_best)
     pick2 = ok2 & (~ok1 | (s2 < s1))
     ok = ok1 | ok2
-    return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok
+    return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok, mi.UInt32(ok1) + mi.UInt32(ok2)
 
 
 # ---------------------------------------------------------------------------
@@ -492,7 +504,7 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
     found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
     while ray.active & (node < ray.end):
-        node_next, s_hit, u_hit, seg_hit, hit = _visit(
+        node_next, s_hit, u_hit, seg_hit, hit, _ = _visit(
             data, ray, node, s_best, ray.active & (node < ray.end))
         s_best = dr.select(hit, s_hit, s_best)
         u = dr.select(hit, u_hit, u)
@@ -517,12 +529,31 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     node = mi.UInt32(ray.first)          # current node of the threaded BVH
     found = dr.zeros(mi.Bool, dr.width(node))  # whether any hit was found
     while ray.active & (node < ray.end) & ~found:
-        node_next, s_hit, _, _, hit = _visit(
+        node_next, s_hit, _, _, hit, _ = _visit(
             data, ray, node, ray.s_hi, ray.active & (node < ray.end))
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
         node = node_next
     return found
+
+
+@dr.syntax
+def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
+                             active: mi.Bool) -> mi.UInt32:
+    """Number of crossings of the ray ``o + t d`` (``t > 0``) with the lathe,
+    every one that :func:`intersect_polyline` can report. For a ray that
+    starts outside the lathe's bounding cylinder that is the whole line, and
+    the number is even for every ray (the joint rule of
+    :func:`_segment_roots`): the watertightness tests count it."""
+    ray = _Ray(data, o, d, dr.full(mi.Float, dr.inf, dr.width(o)), active)
+    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    total = dr.zeros(mi.UInt32, dr.width(node))  # crossings so far
+    while ray.active & (node < ray.end):
+        node_next, _, _, _, _, count = _visit(data, ray, node, ray.s_hi,
+                                              ray.active & (node < ray.end))
+        total += count
+        node = node_next
+    return total
 
 
 def polyline_geometry(data: PolylineData, p: mi.Point3f, seg: mi.UInt32,
