@@ -83,6 +83,7 @@ __all__ = [
     "intersect_polyline",
     "occluded_polyline",
     "count_crossings_polyline",
+    "next_crossing_polyline",
     "polyline_geometry",
 ]
 
@@ -289,6 +290,27 @@ def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData
 # One traversal step (Dr.Jit, traced)
 # ---------------------------------------------------------------------------
 
+class _Key:
+    """A crossing's place along its ray: ``s`` (moved frame), then ``key =
+    2 segment + root`` (``root`` 0 for ``s1``, 1 for ``s2`` of
+    :func:`_roots`) among crossings at the same ``s``. A ray walked through
+    its crossings from one origin (:func:`next_crossing_polyline`) finds
+    every crossing once, in this order, even where float32 puts several at
+    the same ``s``."""
+
+    def __init__(self, s: mi.Float, key: mi.UInt32) -> None:
+        self.s = s
+        self.key = key
+
+    def before(self, s, key) -> mi.Bool:
+        """Whether this key comes before ``(s, key)``."""
+        return (self.s < s) | ((self.s == s) & (self.key < key))
+
+    def after(self, s, key) -> mi.Bool:
+        """Whether this key comes after ``(s, key)``."""
+        return (self.s > s) | ((self.s == s) & (self.key > key))
+
+
 class _Ray(LatheRay):
     """The common ray set-up plus the per-ray constants of the segment test."""
 
@@ -302,6 +324,8 @@ class _Ray(LatheRay):
         # d_z o_xy, for the sides of the segments' end points (_side_terms)
         self.dz_ox = self.d.z * self.o.x
         self.dz_oy = self.d.z * self.o.y
+        # Crossings count after this key (t > 0: every one past s_lo)
+        self.after = _Key(self.s_lo, mi.UInt32(0xFFFFFFFF))
 
 
 def _roots(ray: _Ray, n_r, n_z, c):
@@ -339,16 +363,17 @@ def _enter_inner(ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
 
 
 @dr.syntax
-def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
-           active: mi.Bool):
+def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, best: _Key, active: mi.Bool):
     """Process one node: box test for inner nodes, segment test for leaves.
 
-    Returns ``(next_node, s_hit, u_hit, seg, hit, count)``; ``hit`` marks a
-    leaf whose segment is hit at ``s_hit < s_best``, ``count`` its number of
-    crossings there. Each test is a symbolic
-    ``if``: a packet whose lanes are all at leaves (or all at inner nodes)
-    skips the other one.
+    Returns ``(next_node, s_hit, u_hit, seg, hit, key, count)``; ``hit``
+    marks a leaf whose segment is crossed after ``ray.after`` and before
+    ``best`` (key order, :class:`_Key`), at ``s_hit`` with key ``key``,
+    ``count`` its number of crossings there. Each test is a symbolic ``if``:
+    a packet whose lanes are all at leaves (or all at inner nodes) skips the
+    other one.
     """
+    s_best = best.s
     rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
     rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
     link, is_leaf, seg = bvh_link(data.links, node, active)
@@ -364,13 +389,14 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     s_hit = mi.Float(s1)      # leaf: the nearer root on the segment
     u_hit = mi.Float(0.0)     # ... its fraction along the segment
     hit = mi.Bool(False)      # ... and whether it is a hit before s_best
+    key = mi.UInt32(0)        # ... its crossing key (_Key)
     count = mi.UInt32(0)      # ... its number of crossings before s_best
     if leaf:
         # Half-open joints, see _segment_roots
-        s_hit, u_hit, ok, count = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, has_root,
-                                         s_best, leaf)
+        s_hit, u_hit, ok, key, count = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0,
+                                                    has_root, best, leaf)
         hit = leaf & ok
-    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit, count
+    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit, key, count
 
 
 def _side_terms(ray: _Ray, r, z):
@@ -471,17 +497,19 @@ def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real,
 
 
 def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root,
-                 s_best, active):
-    """The nearer crossing of segment ``seg`` (:func:`_segment_roots`) in
-    ``(ray.s_lo, s_best)``: ``(s, u, found, count)``, ``count`` the number
-    of its crossings there."""
+                 best: _Key, active):
+    """The first crossing of segment ``seg`` (:func:`_segment_roots`) after
+    ``ray.after`` and before ``best`` in key order (:class:`_Key`): ``(s, u,
+    found, key, count)``, ``count`` the number of its crossings there."""
     take1, take2, u1, u2 = _segment_roots(data, ray, seg, rec0, rec1, s1, s2, real, has_root,
                                           active)
-    ok1 = take1 & (s1 > ray.s_lo) & (s1 < s_best)
-    ok2 = take2 & (s2 > ray.s_lo) & (s2 < s_best)
+    key1, key2 = 2 * seg, 2 * seg + 1
+    ok1 = take1 & ray.after.before(s1, key1) & best.after(s1, key1)
+    ok2 = take2 & ray.after.before(s2, key2) & best.after(s2, key2)
     pick2 = ok2 & (~ok1 | (s2 < s1))
     ok = ok1 | ok2
-    return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok, mi.UInt32(ok1) + mi.UInt32(ok2)
+    return (dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok,
+            dr.select(pick2, key2, key1), mi.UInt32(ok1) + mi.UInt32(ok2))
 
 
 # ---------------------------------------------------------------------------
@@ -489,6 +517,32 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, h
 # ---------------------------------------------------------------------------
 
 @dr.syntax
+def _first_crossing(data: PolylineData, ray: _Ray):
+    """The first crossing of ``ray`` after ``ray.after``, before its exit
+    from the bounding cylinder and ``tmax``: ``(hit, s, key)``."""
+    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
+    key = dr.zeros(mi.UInt32, dr.width(s_best))  # its key (_Key)
+    seg = dr.zeros(mi.UInt32, dr.width(s_best))  # its segment
+    u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
+    found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
+    while ray.active & (node < ray.end):
+        node_next, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
+            data, ray, node, _Key(s_best, key), ray.active & (node < ray.end))
+        s_best = dr.select(hit, s_hit, s_best)
+        key = dr.select(hit, key_hit, key)
+        u = dr.select(hit, u_hit, u)
+        seg = dr.select(hit, seg_hit, seg)
+        found |= hit
+        node = node_next
+
+    t = ray.s_enter + s_best
+    valid = found & (t > 0) & (t < ray.tmax)
+    hit = PolylineHit(t=dr.select(valid, t * ray.t_scale, dr.inf), seg=seg,
+                      u=dr.clip(u, 0, 1), valid=valid)
+    return hit, s_best, key
+
+
 def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
                        tmax: mi.Float, active: mi.Bool) -> PolylineHit:
     """Nearest intersection with ``0 < t < tmax`` of the ray ``o + t d``.
@@ -497,25 +551,32 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     length and ``t`` is measured in units of ``d``. Traceable inside an outer
     symbolic loop (no evaluation happens here).
     """
-    ray = _Ray(data, o, d, tmax, active)
-    node = mi.UInt32(ray.first)          # current node of the threaded BVH
-    s_best = mi.Float(ray.s_hi)          # nearest hit so far (moved frame)
-    seg = dr.zeros(mi.UInt32, dr.width(s_best))  # its segment
-    u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
-    found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
-    while ray.active & (node < ray.end):
-        node_next, s_hit, u_hit, seg_hit, hit, _ = _visit(
-            data, ray, node, s_best, ray.active & (node < ray.end))
-        s_best = dr.select(hit, s_hit, s_best)
-        u = dr.select(hit, u_hit, u)
-        seg = dr.select(hit, seg_hit, seg)
-        found |= hit
-        node = node_next
+    return _first_crossing(data, _Ray(data, o, d, tmax, active))[0]
 
-    t = ray.s_enter + s_best
-    valid = found & (t > 0) & (t < ray.tmax)
-    return PolylineHit(t=dr.select(valid, t * ray.t_scale, dr.inf), seg=seg,
-                       u=dr.clip(u, 0, 1), valid=valid)
+
+def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
+                           active: mi.Bool, after_s: mi.Float | None = None,
+                           after_key: mi.UInt32 | None = None
+                           ) -> tuple[PolylineHit, mi.Float, mi.UInt32]:
+    """The next crossing of the ray ``o + t d`` (``0 < t < tmax``) after the
+    one that a previous call with the same ``o``, ``d`` returned as
+    ``(after_s, after_key)`` (``None``: the first crossing, as
+    :func:`intersect_polyline`): ``(hit, s, key)``, ``(s, key)`` this
+    crossing's place to pass to the next call.
+
+    Walking a ray through its crossings this way, from its first origin and
+    without offsets, finds each crossing exactly once, also where two of
+    them are closer together than any offset or rounded to the same ``t``
+    (a corner): with the joint rule of :func:`_segment_roots` a ray from
+    outside the lathe then crosses it an even number of times.
+    """
+    ray = _Ray(data, o, d, tmax, active)
+    if after_s is not None:
+        later = after_s > ray.s_lo
+        ray.after = _Key(dr.select(later, after_s, ray.s_lo),
+                         dr.select(later, after_key, 0xFFFFFFFF))
+        ray.s_lo = ray.after.s  # boxes before it need no visit
+    return _first_crossing(data, ray)
 
 
 @dr.syntax
@@ -529,8 +590,8 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     node = mi.UInt32(ray.first)          # current node of the threaded BVH
     found = dr.zeros(mi.Bool, dr.width(node))  # whether any hit was found
     while ray.active & (node < ray.end) & ~found:
-        node_next, s_hit, _, _, hit, _ = _visit(
-            data, ray, node, ray.s_hi, ray.active & (node < ray.end))
+        node_next, s_hit, _, _, hit, _, _ = _visit(
+            data, ray, node, _Key(ray.s_hi, mi.UInt32(0)), ray.active & (node < ray.end))
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
         node = node_next
@@ -549,8 +610,8 @@ def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     node = mi.UInt32(ray.first)          # current node of the threaded BVH
     total = dr.zeros(mi.UInt32, dr.width(node))  # crossings so far
     while ray.active & (node < ray.end):
-        node_next, _, _, _, _, count = _visit(data, ray, node, ray.s_hi,
-                                              ray.active & (node < ray.end))
+        node_next, _, _, _, _, _, count = _visit(
+            data, ray, node, _Key(ray.s_hi, mi.UInt32(0)), ray.active & (node < ray.end))
         total += count
         node = node_next
     return total
