@@ -296,18 +296,23 @@ class _Key:
     :func:`_roots`) among crossings at the same ``s``. A ray walked through
     its crossings from one origin (:func:`next_crossing_polyline`) finds
     every crossing once, in this order, even where float32 puts several at
-    the same ``s``."""
+    the same ``s``. ``key=None`` (the plain queries) compares ``s`` alone:
+    no extra work on the hot path."""
 
-    def __init__(self, s: mi.Float, key: mi.UInt32) -> None:
+    def __init__(self, s: mi.Float, key: mi.UInt32 | None = None) -> None:
         self.s = s
         self.key = key
 
     def before(self, s, key) -> mi.Bool:
         """Whether this key comes before ``(s, key)``."""
+        if self.key is None:
+            return self.s < s
         return (self.s < s) | ((self.s == s) & (self.key < key))
 
     def after(self, s, key) -> mi.Bool:
         """Whether this key comes after ``(s, key)``."""
+        if self.key is None:
+            return self.s > s
         return (self.s > s) | ((self.s == s) & (self.key > key))
 
 
@@ -325,7 +330,7 @@ class _Ray(LatheRay):
         self.dz_ox = self.d.z * self.o.x
         self.dz_oy = self.d.z * self.o.y
         # Crossings count after this key (t > 0: every one past s_lo)
-        self.after = _Key(self.s_lo, mi.UInt32(0xFFFFFFFF))
+        self.after = _Key(self.s_lo)
 
 
 def _roots(ray: _Ray, n_r, n_z, c):
@@ -517,9 +522,11 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, h
 # ---------------------------------------------------------------------------
 
 @dr.syntax
-def _first_crossing(data: PolylineData, ray: _Ray):
+def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     """The first crossing of ``ray`` after ``ray.after``, before its exit
-    from the bounding cylinder and ``tmax``: ``(hit, s, key)``."""
+    from the bounding cylinder and ``tmax``: ``(hit, s, key)``; ``keyed``:
+    ties in ``s`` are broken by the key (:class:`_Key`), else by the order
+    of the traversal."""
     node = mi.UInt32(ray.first)          # current node of the threaded BVH
     s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
     key = dr.zeros(mi.UInt32, dr.width(s_best))  # its key (_Key)
@@ -528,7 +535,7 @@ def _first_crossing(data: PolylineData, ray: _Ray):
     found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
     while ray.active & (node < ray.end):
         node_next, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
-            data, ray, node, _Key(s_best, key), ray.active & (node < ray.end))
+            data, ray, node, _Key(s_best, key if keyed else None), ray.active & (node < ray.end))
         s_best = dr.select(hit, s_hit, s_best)
         key = dr.select(hit, key_hit, key)
         u = dr.select(hit, u_hit, u)
@@ -551,7 +558,7 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     length and ``t`` is measured in units of ``d``. Traceable inside an outer
     symbolic loop (no evaluation happens here).
     """
-    return _first_crossing(data, _Ray(data, o, d, tmax, active))[0]
+    return _first_crossing(data, _Ray(data, o, d, tmax, active), False)[0]
 
 
 def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
@@ -576,7 +583,9 @@ def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tm
         ray.after = _Key(dr.select(later, after_s, ray.s_lo),
                          dr.select(later, after_key, 0xFFFFFFFF))
         ray.s_lo = ray.after.s  # boxes before it need no visit
-    return _first_crossing(data, ray)
+    else:
+        ray.after = _Key(ray.s_lo, mi.UInt32(0xFFFFFFFF))
+    return _first_crossing(data, ray, True)
 
 
 @dr.syntax
@@ -591,7 +600,7 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     found = dr.zeros(mi.Bool, dr.width(node))  # whether any hit was found
     while ray.active & (node < ray.end) & ~found:
         node_next, s_hit, _, _, hit, _, _ = _visit(
-            data, ray, node, _Key(ray.s_hi, mi.UInt32(0)), ray.active & (node < ray.end))
+            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
         node = node_next
@@ -611,7 +620,7 @@ def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     total = dr.zeros(mi.UInt32, dr.width(node))  # crossings so far
     while ray.active & (node < ray.end):
         node_next, _, _, _, _, _, count = _visit(
-            data, ray, node, _Key(ray.s_hi, mi.UInt32(0)), ray.active & (node < ray.end))
+            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
         total += count
         node = node_next
     return total
