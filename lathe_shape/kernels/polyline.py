@@ -429,19 +429,34 @@ def _joint_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool)
     (see ``_side_points``). Points on the axis, and every point for a
     horizontal ray, are never outside (strict comparison), so the profile's
     ends on the axis agree."""
-    # Scalar gathers: rare, and packet gathers of another buffer would let
-    # its memory layout select among more traced kernels
-    side = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(8)]
-    ends = mi.Vector4f(*side[:4])
-    moved = mi.Vector4f(*side[4:])
+    # Scalar gathers: packet gathers of another buffer would let its memory
+    # layout select among more traced kernels
+    ends = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(4)]
+    outside = [mi.Bool(False), mi.Bool(False)]  # start, end outside
+    unsure = [mi.Bool(False), mi.Bool(False)]   # ... float32 cannot tell
+    for k in range(2):
+        radius2, ray2 = _side_terms(ray, ends[2 * k], ends[2 * k + 1])
+        outside[k] = radius2 > ray2
+        unsure[k] = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
+    # Rare: packets without an unsure lane skip the moved points
+    moved_start, moved_end = _moved_sides(data, ray, seg, active & (unsure[0] | unsure[1]))
+    return (dr.select(unsure[0], moved_start, outside[0]),
+            dr.select(unsure[1], moved_end, outside[1]))
 
-    def side(r, z, r_moved, z_moved):
-        radius2, ray2 = _side_terms(ray, r, z)
-        radius2_m, ray2_m = _side_terms(ray, r_moved, z_moved)
-        unsure = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
-        return dr.select(unsure, radius2_m > ray2_m, radius2 > ray2)
 
-    return side(ends.x, ends.y, moved.x, moved.y), side(ends.z, ends.w, moved.z, moved.w)
+@dr.syntax
+def _moved_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool):
+    """Whether the start and the end of segment ``seg``, moved into the solid
+    (``_side_points``), lie outside the ray's surface of revolution."""
+    moved_start = mi.Bool(False)  # the moved start is outside
+    moved_end = mi.Bool(False)    # the moved end is outside
+    if active:
+        moved = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(4, 8)]
+        radius2, ray2 = _side_terms(ray, moved[0], moved[1])
+        moved_start = radius2 > ray2
+        radius2, ray2 = _side_terms(ray, moved[2], moved[3])
+        moved_end = radius2 > ray2
+    return moved_start, moved_end
 
 
 @dr.syntax
