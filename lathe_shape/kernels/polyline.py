@@ -40,13 +40,22 @@ therefore first fixes the parity of its crossings: odd exactly when its two
 end points lie on different sides of the ray's surface of revolution (the
 hyperboloid swept by the ray about the axis), a test evaluated bit for bit
 alike by both segments of a joint, so that the parities of all segments
-add up to an even number of crossings for every ray: a ray that enters
-leaves. An odd segment reports the one root nearest to it (within a small
-tolerance of its ends), an even one both roots or none. Where float32
-cannot tell a joint's side, the side of the joint moved slightly into the
-solid decides, so that a ray grazing a corner reports no crossing there
-rather than two coincident ones. This costs little: only segments with a
-root at one of their ends evaluate the sides (a symbolic ``if``).
+add up to an even number of crossings for every line: a ray that enters
+leaves. The roots only say where those crossings are: an odd segment
+reports the one root nearest to it, an even one both roots (when both lie
+on it within a small tolerance) or none. Where float32 cannot tell a
+joint's side, the side of the joint moved slightly into the solid decides,
+so that a ray grazing a corner reports no crossing there rather than two
+coincident ones. Every segment whose cone the line meets evaluates the
+sides (a few multiply-adds; the moved joints only in packets with a lane
+that needs them).
+
+Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
+``spawn_ray`` offsets the origin along the normal) makes a new line and can
+skip a second crossing closer than the offset, at a corner.
+:func:`next_crossing_polyline` instead keeps the ray's origin and asks for
+the crossing after the one just taken, ordered by ray parameter, then
+segment and root: each crossing of the line is found exactly once.
 
 The functions need an active JIT Mitsuba variant (``llvm_*`` or ``cuda_*``)
 when called; importing the module needs none.
@@ -97,8 +106,8 @@ _BOX_PAD = 8.0
 
 #: Shift of a joint into the solid for its side test, in units of the joint
 #: tolerance (see _side_points): about float32 rounding of the unit frame.
-#: Measured with scripts/leak_test.py (1e6 rays), odd crossing counts fall
-#: from 632 without a shift to 181 at 0.01; 0.001 and 0.1 give 485 and 247.
+#: It decides on which side of a corner a grazing ray passes, which matters
+#: to rays restarted past a hit (scripts/leak_test.py, spawn-ray walk).
 _SIDE_SHIFT = 0.01
 
 
