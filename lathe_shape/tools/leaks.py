@@ -268,10 +268,11 @@ def crossing_walk(data: PolylineData, o: np.ndarray, d: np.ndarray,
 
 
 def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
-                       chunk: int = 250_000) -> dict[str, int]:
+                       chunk: int = 250_000, kind: str | None = None) -> dict[str, int]:
     """Spawn-ray parity walk through the lathe of the profile file
     ``filename`` (a closed solid, local frame = world), in chunks of
-    ``chunk`` rays: the exact kernel (``ray_intersect_exact``) and Mitsuba's
+    ``chunk`` rays (``kind``: the lathe's profile kind, default the file's
+    own): the exact kernel (``ray_intersect_exact``) and Mitsuba's
     mesh of the lathe (``mesh_segments`` azimuthal steps, the scene's own
     accelerator) on the same :func:`parity_rays`, both walked with
     ``si.spawn_ray`` (:func:`spawn_walk`), and the exact kernel walked
@@ -279,15 +280,20 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
     only). Every ray starts outside, so an odd number of crossings is a
     leak. Returns the counts ``rays``, ``hitting_exact``, ``odd_exact``,
     ``stuck_exact`` and the same for ``mesh`` and ``walk``."""
-    scene = mi.load_dict({"type": "scene", "lathe": {"type": "lathe", "filename": filename,
-                                                     "mesh_segments": mesh_segments}})
+    lathe_props = {"type": "lathe", "filename": filename, "mesh_segments": mesh_segments}
+    scene = mi.load_dict({"type": "scene", "lathe": lathe_props | ({"kind": kind} if kind else {})})
     lathe = scene.shapes()[0]
     queries = {"exact": lathe.ray_intersect_exact,
                "mesh": lambda ray, active: scene.ray_intersect(ray, active=active)}
     walks = {name: partial(spawn_walk, query) for name, query in queries.items()}
     if isinstance(lathe.surface.data, PolylineData):
         walks["walk"] = partial(crossing_walk, lathe.surface.data)
-    start, end = lathe.profile.segment_points()
+    if "walk" in walks:
+        start, end = lathe.profile.segment_points()
+    else:
+        # B-splines: the reference mesh's profile samples stand for vertices
+        points = lathe.surface.profile_samples[0]
+        start, end = points[:-1], points[1:]
     rng = np.random.default_rng(seed)
     counts = {"rays": 0} | {f"{what}_{name}": 0 for name in walks for what in ("hitting", "odd", "stuck")}
     for done in range(0, n, chunk):
