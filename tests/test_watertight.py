@@ -5,17 +5,22 @@ also for rays aimed exactly at profile vertices and grazing corners."""
 
 from __future__ import annotations
 
+import os
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 from conftest import SCENES
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lathe_shape.kernels.polyline import build_polyline_data, count_crossings_polyline
 from lathe_shape.surfaces import PolylineSurface
 from lathe_shape.tools import leaks
 from lathe_shape.tools import reference as ref
 
+EXAMPLES = int(os.environ.get("LATHE_FUZZ_EXAMPLES", "10"))
 SCENE_FILES = ["brandy_bottle.csv", "sundae_cup.csv", "wine_glass.csv"]
 
 
@@ -64,3 +69,19 @@ def test_random_profiles_lines_cross_evenly():
         crossings, _ = leaks.crossing_walk(data, o, d)
         assert np.sum(total % 2) == 0, name
         np.testing.assert_array_equal(crossings, total, err_msg=name)
+
+
+@settings(max_examples=EXAMPLES, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["star", "vase", "vase_tips", "glass"]),
+       scale=st.sampled_from([1e-3, 1.0, 1e4]))
+def test_random_profile_lines_cross_evenly_property(seed, kind, scale):
+    """Random profiles of each family at several sizes: every line crosses
+    them an even number of times."""
+    rng = np.random.default_rng(seed)
+    prof = {"star": lambda: ref.star_profile(rng, int(rng.integers(3, 40))),
+            "vase": lambda: ref.vase_profile(rng, int(rng.integers(3, 40))),
+            "vase_tips": lambda: ref.vase_profile(rng, int(rng.integers(3, 40)), flat_ends=False),
+            "glass": lambda: ref.glass_profile(rng, int(rng.integers(2, 30)))}[kind]()
+    start, end = (scale * p for p in ref.segment_points(prof))
+    o, d = leaks.parity_rays(start, end, rng, 2000)
+    assert np.sum(line_crossings(build_polyline_data(start, end), o, d) % 2) == 0

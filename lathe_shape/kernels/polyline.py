@@ -489,9 +489,9 @@ def _crossing_parity(data: PolylineData, ray: _Ray, seg, has_root, active):
 
 def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root, active):
     """The crossings of the ray's line with segment ``seg`` (leaf record
-    ``(rec0, rec1)``) among the roots ``s1``, ``s2``: ``(take1, take2, u1,
-    u2)``, ``u`` the fraction along the segment (unclipped); ``real``: the
-    roots are real (``disc >= 0``).
+    ``(rec0, rec1)``) among the roots ``s1``, ``s2``: ``(take1, take2, s1,
+    s2, u1, u2)``, ``u`` the fraction along the segment (unclipped);
+    ``real``: the roots are real (``disc >= 0``).
 
     Joints are half-open by construction: the parity of the segment's
     crossings is fixed first (:func:`_crossing_parity`), and the roots only
@@ -522,7 +522,17 @@ def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real,
     odd = _crossing_parity(data, ray, seg, has_root, active)
     pair = real & (n_r != 0) & (off1 <= tol_u) & (off2 <= tol_u)
     first = off1 <= off2  # odd: s1 is the root nearer to the segment
-    return dr.select(odd, first, pair), dr.select(odd, ~first, pair), u1, u2
+    take1, take2 = dr.select(odd, first, pair), dr.select(odd, ~first, pair)
+    # An odd segment's root off it (ill conditioned: a ray nearly along the
+    # segment's cone, through its joint) is moved to the segment's heights,
+    # where its crossing lies: else it could fall past the bounding cylinder.
+    z1 = dr.fma(ez, dr.square(data.tol / tol_u), z0)
+    s_z0 = (z0 - o.z) * ray.inv_dz
+    s_z1 = (z1 - o.z) * ray.inv_dz
+    lo, hi = dr.minimum(s_z0, s_z1), dr.maximum(s_z0, s_z1)
+    s1 = dr.select(take1 & (off1 > tol_u), dr.clip(s1, lo, hi), s1)
+    s2 = dr.select(take2 & (off2 > tol_u), dr.clip(s2, lo, hi), s2)
+    return take1, take2, s1, s2, u1, u2
 
 
 def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root,
@@ -530,8 +540,8 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, h
     """The first crossing of segment ``seg`` (:func:`_segment_roots`) after
     ``ray.after`` and before ``best`` in key order (:class:`_Key`): ``(s, u,
     found, key, count)``, ``count`` the number of its crossings there."""
-    take1, take2, u1, u2 = _segment_roots(data, ray, seg, rec0, rec1, s1, s2, real, has_root,
-                                          active)
+    take1, take2, s1, s2, u1, u2 = _segment_roots(data, ray, seg, rec0, rec1, s1, s2, real,
+                                                  has_root, active)
     key1, key2 = 2 * seg, 2 * seg + 1
     ok1 = take1 & ray.after.before(s1, key1) & best.after(s1, key1)
     ok2 = take2 & ray.after.before(s2, key2) & best.after(s2, key2)
