@@ -526,13 +526,25 @@ def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real,
     # An odd segment's root off it (ill conditioned: a ray nearly along the
     # segment's cone, through its joint) is moved to the segment's heights,
     # where its crossing lies: else it could fall past the bounding cylinder.
-    z1 = dr.fma(ez, dr.square(data.tol / tol_u), z0)
-    s_z0 = (z0 - o.z) * ray.inv_dz
-    s_z1 = (z1 - o.z) * ray.inv_dz
-    lo, hi = dr.minimum(s_z0, s_z1), dr.maximum(s_z0, s_z1)
-    s1 = dr.select(take1 & (off1 > tol_u), dr.clip(s1, lo, hi), s1)
-    s2 = dr.select(take2 & (off2 > tol_u), dr.clip(s2, lo, hi), s2)
+    move1, move2 = take1 & (off1 > tol_u), take2 & (off2 > tol_u)
+    s1, s2 = _to_heights(data, ray, z0, rec1.z, tol_u, s1, s2, move1, move2, active & (move1 | move2))
     return take1, take2, s1, s2, u1, u2
+
+
+@dr.syntax
+def _to_heights(data: PolylineData, ray: _Ray, z0, ez, tol_u, s1, s2, move1, move2, active):
+    """``s1``, ``s2`` clipped (where ``move1``, ``move2``) to the interval of
+    ``s`` over which the ray passes the segment's heights, from ``z0`` to
+    ``z0 + ez L^2`` (``L = tol / tol_u``). Rare: packets without an active
+    lane skip it."""
+    if active:
+        z1 = dr.fma(ez, dr.square(data.tol / tol_u), z0)
+        s_z0 = (z0 - ray.o.z) * ray.inv_dz
+        s_z1 = (z1 - ray.o.z) * ray.inv_dz
+        lo, hi = dr.minimum(s_z0, s_z1), dr.maximum(s_z0, s_z1)
+        s1 = dr.select(move1, dr.clip(s1, lo, hi), s1)
+        s2 = dr.select(move2, dr.clip(s2, lo, hi), s2)
+    return s1, s2
 
 
 def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root,
