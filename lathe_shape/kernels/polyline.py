@@ -39,16 +39,17 @@ rounding, land just outside both, or just inside both. Each segment
 therefore first fixes the parity of its crossings: odd exactly when its two
 end points lie on different sides of the ray's surface of revolution (the
 hyperboloid swept by the ray about the axis), a test evaluated bit for bit
-alike by both segments of a joint, so that the parities of all segments
-add up to an even number of crossings for every line: a ray that enters
-leaves. The roots only say where those crossings are: an odd segment
-reports the one root nearest to it, an even one both roots (when both lie
-on it within a small tolerance) or none. Where float32 cannot tell a
-joint's side, the side of the joint moved slightly into the solid decides,
-so that a ray grazing a corner reports no crossing there rather than two
-coincident ones. Every segment whose cone the line meets evaluates the
-sides (a few multiply-adds; the moved joints only in packets with a lane
-that needs them).
+alike by both segments of a joint, so that the parities of all segments add
+up to an even number of crossings for every line: a ray that enters leaves.
+The roots only say where those crossings are: an odd segment reports the one
+root nearest to it, an even one both roots (when both lie on it within a
+small tolerance) or none; an odd segment's root that float32 puts off the
+segment (a ray nearly along its cone) is moved back to the segment's
+heights. Where float32 cannot tell a joint's side, the side of the joint
+moved slightly into the solid decides, so that a ray grazing a corner
+reports no crossing there rather than two coincident ones. Every segment
+whose cone the line meets evaluates the sides (a few multiply-adds; the
+moved joints only in packets with a lane that needs them).
 
 Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
 ``spawn_ray`` offsets the origin along the normal) makes a new line and can
