@@ -108,7 +108,9 @@ _BOX_PAD = 8.0
 #: Shift of a joint into the solid for its side test, in units of the joint
 #: tolerance (see _side_points): about float32 rounding of the unit frame.
 #: It decides on which side of a corner a grazing ray passes, which matters
-#: to rays restarted past a hit (scripts/leak_test.py, spawn-ray walk).
+#: to rays restarted past a hit: in the spawn-ray walk of scripts/leak_test.py
+#: (9e5 rays) odd counts are 571 without a shift, 439 at 0.001, 113 at 0.01
+#: and 157 at 0.1 (the offset-free walk has none at any of them).
 _SIDE_SHIFT = 0.01
 
 
