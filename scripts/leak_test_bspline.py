@@ -3,14 +3,21 @@
 Rays from outside are followed through every hit (restarting 1e-4 of the
 object's size past each one); a closed solid must be crossed an even number
 of times. Prints the leak count and rate per test curve (a closed periodic
-ring, an open egg, the 12-segment glass) and in total.
+ring, an open egg, the 12-segment glass) and in total. Then the spawn-ray
+parity walk of ``scripts/leak_test.py`` (restarts from ``si.spawn_ray``,
+exact kernel against Mitsuba's mesh) through the paper's B-spline glass
+(``scenes/paper/glass_bspline.csv``) on a third as many rays.
 
     python scripts/leak_test_bspline.py [N_RAYS] [--variant llvm_ad_rgb]   (default 1e6 rays in all)
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from lathe_shape.tools import leaks
+
+GLASS = Path(__file__).resolve().parents[1] / "scenes" / "paper" / "glass_bspline.csv"
 
 
 def main() -> None:
@@ -28,6 +35,9 @@ def main() -> None:
               flush=True)
     print(f"total: {per_curve * len(curves)} rays, {total_entered} entering, {total_leaks} leaks, "
           f"leak rate {total_leaks / max(total_entered, 1):.2e} (per entering ray)")
+    counts = leaks.scene_parity_leaks(str(GLASS), n_rays // 3, seed=7, mesh_segments=args.mesh_segments,
+                                      chunk=args.chunk, kind="bspline")
+    print(leaks.parity_summary("glass_bspline", counts))
 
 
 if __name__ == "__main__":

@@ -39,14 +39,24 @@ rounding, land just outside both, or just inside both. Each segment
 therefore first fixes the parity of its crossings: odd exactly when its two
 end points lie on different sides of the ray's surface of revolution (the
 hyperboloid swept by the ray about the axis), a test evaluated bit for bit
-alike by both segments of a joint, so that the parities of all segments
-add up to an even number of crossings for every ray: a ray that enters
-leaves. An odd segment reports the one root nearest to it (within a small
-tolerance of its ends), an even one both roots or none. Where float32
-cannot tell a joint's side, the side of the joint moved slightly into the
-solid decides, so that a ray grazing a corner reports no crossing there
-rather than two coincident ones. This costs little: only segments with a
-root at one of their ends evaluate the sides (a symbolic ``if``).
+alike by both segments of a joint, so that the parities of all segments add
+up to an even number of crossings for every line: a ray that enters leaves.
+The roots only say where those crossings are: an odd segment reports the one
+root nearest to it, an even one both roots (when both lie on it within a
+small tolerance) or none; an odd segment's root that float32 puts off the
+segment (a ray nearly along its cone) is moved back to the segment's
+heights. Where float32 cannot tell a joint's side, the side of the joint
+moved slightly into the solid decides, so that a ray grazing a corner
+reports no crossing there rather than two coincident ones. Every segment
+whose cone the line meets evaluates the sides (a few multiply-adds; the
+moved joints only in packets with a lane that needs them).
+
+Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
+``spawn_ray`` offsets the origin along the normal) makes a new line and can
+skip a second crossing closer than the offset, at a corner.
+:func:`next_crossing_polyline` instead keeps the ray's origin and asks for
+the crossing after the one just taken, ordered by ray parameter, then
+segment and root: each crossing of the line is found exactly once.
 
 The functions need an active JIT Mitsuba variant (``llvm_*`` or ``cuda_*``)
 when called; importing the module needs none.
@@ -82,6 +92,8 @@ __all__ = [
     "profile_polyline_data",
     "intersect_polyline",
     "occluded_polyline",
+    "count_crossings_polyline",
+    "next_crossing_polyline",
     "polyline_geometry",
 ]
 
@@ -95,8 +107,10 @@ _BOX_PAD = 8.0
 
 #: Shift of a joint into the solid for its side test, in units of the joint
 #: tolerance (see _side_points): about float32 rounding of the unit frame.
-#: Measured with scripts/leak_test.py (1e6 rays), odd crossing counts fall
-#: from 632 without a shift to 181 at 0.01; 0.001 and 0.1 give 485 and 247.
+#: It decides on which side of a corner a grazing ray passes, which matters
+#: to rays restarted past a hit: in the spawn-ray walk of scripts/leak_test.py
+#: (9e5 rays) odd counts are 571 without a shift, 439 at 0.001, 113 at 0.01
+#: and 157 at 0.1 (the offset-free walk has none at any of them).
 _SIDE_SHIFT = 0.01
 
 
@@ -288,6 +302,32 @@ def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData
 # One traversal step (Dr.Jit, traced)
 # ---------------------------------------------------------------------------
 
+class _Key:
+    """A crossing's place along its ray: ``s`` (moved frame), then ``key =
+    2 segment + root`` (``root`` 0 for ``s1``, 1 for ``s2`` of
+    :func:`_roots`) among crossings at the same ``s``. A ray walked through
+    its crossings from one origin (:func:`next_crossing_polyline`) finds
+    every crossing once, in this order, even where float32 puts several at
+    the same ``s``. ``key=None`` (the plain queries) compares ``s`` alone:
+    no extra work on the hot path."""
+
+    def __init__(self, s: mi.Float, key: mi.UInt32 | None = None) -> None:
+        self.s = s
+        self.key = key
+
+    def before(self, s, key) -> mi.Bool:
+        """Whether this key comes before ``(s, key)``."""
+        if self.key is None:
+            return self.s < s
+        return (self.s < s) | ((self.s == s) & (self.key < key))
+
+    def after(self, s, key) -> mi.Bool:
+        """Whether this key comes after ``(s, key)``."""
+        if self.key is None:
+            return self.s > s
+        return (self.s > s) | ((self.s == s) & (self.key > key))
+
+
 class _Ray(LatheRay):
     """The common ray set-up plus the per-ray constants of the segment test."""
 
@@ -301,6 +341,8 @@ class _Ray(LatheRay):
         # d_z o_xy, for the sides of the segments' end points (_side_terms)
         self.dz_ox = self.d.z * self.o.x
         self.dz_oy = self.d.z * self.o.y
+        # Crossings count after this key (t > 0: every one past s_lo)
+        self.after = _Key(self.s_lo)
 
 
 def _roots(ray: _Ray, n_r, n_z, c):
@@ -338,15 +380,17 @@ def _enter_inner(ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
 
 
 @dr.syntax
-def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
-           active: mi.Bool):
+def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, best: _Key, active: mi.Bool):
     """Process one node: box test for inner nodes, segment test for leaves.
 
-    Returns ``(next_node, s_hit, u_hit, seg, hit)``; ``hit`` marks a leaf
-    whose segment is hit at ``s_hit < s_best``. Each test is a symbolic
-    ``if``: a packet whose lanes are all at leaves (or all at inner nodes)
-    skips the other one.
+    Returns ``(next_node, s_hit, u_hit, seg, hit, key, count)``; ``hit``
+    marks a leaf whose segment is crossed after ``ray.after`` and before
+    ``best`` (key order, :class:`_Key`), at ``s_hit`` with key ``key``,
+    ``count`` its number of crossings there. Each test is a symbolic ``if``:
+    a packet whose lanes are all at leaves (or all at inner nodes) skips the
+    other one.
     """
+    s_best = best.s
     rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
     rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
     link, is_leaf, seg = bvh_link(data.links, node, active)
@@ -362,11 +406,14 @@ def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, s_best: mi.Float,
     s_hit = mi.Float(s1)      # leaf: the nearer root on the segment
     u_hit = mi.Float(0.0)     # ... its fraction along the segment
     hit = mi.Bool(False)      # ... and whether it is a hit before s_best
+    key = mi.UInt32(0)        # ... its crossing key (_Key)
+    count = mi.UInt32(0)      # ... its number of crossings before s_best
     if leaf:
-        # Half-open joints, see _segment_hit
-        s_hit, u_hit, ok = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0, s_best, leaf)
+        # Half-open joints, see _segment_roots
+        s_hit, u_hit, ok, key, count = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0,
+                                                    has_root, best, leaf)
         hit = leaf & ok
-    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit
+    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit, key, count
 
 
 def _side_terms(ray: _Ray, r, z):
@@ -394,50 +441,70 @@ def _joint_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool)
     (see ``_side_points``). Points on the axis, and every point for a
     horizontal ray, are never outside (strict comparison), so the profile's
     ends on the axis agree."""
-    # Scalar gathers: rare, and packet gathers of another buffer would let
-    # its memory layout select among more traced kernels
-    side = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(8)]
-    ends = mi.Vector4f(*side[:4])
-    moved = mi.Vector4f(*side[4:])
-
-    def side(r, z, r_moved, z_moved):
-        radius2, ray2 = _side_terms(ray, r, z)
-        radius2_m, ray2_m = _side_terms(ray, r_moved, z_moved)
-        unsure = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
-        return dr.select(unsure, radius2_m > ray2_m, radius2 > ray2)
-
-    return side(ends.x, ends.y, moved.x, moved.y), side(ends.z, ends.w, moved.z, moved.w)
+    # Scalar gathers: packet gathers of another buffer would let its memory
+    # layout select among more traced kernels
+    ends = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(4)]
+    outside = [mi.Bool(False), mi.Bool(False)]  # start, end outside
+    unsure = [mi.Bool(False), mi.Bool(False)]   # ... float32 cannot tell
+    for k in range(2):
+        radius2, ray2 = _side_terms(ray, ends[2 * k], ends[2 * k + 1])
+        outside[k] = radius2 > ray2
+        unsure[k] = dr.abs(radius2 - ray2) <= 16 * dr.epsilon(mi.Float) * (radius2 + ray2)
+    # Rare: packets without an unsure lane skip the moved points
+    moved_start, moved_end = _moved_sides(data, ray, seg, active & (unsure[0] | unsure[1]))
+    return (dr.select(unsure[0], moved_start, outside[0]),
+            dr.select(unsure[1], moved_end, outside[1]))
 
 
 @dr.syntax
-def _crossing_parity(data: PolylineData, ray: _Ray, seg, n_r, off1, off2, real, tol_u, active):
-    """Whether the ray crosses segment ``seg`` an odd number of
-    times. ``off1``, ``off2``: how far its roots lie off the segment (in
-    ``u``; <= 0: on it); ``real``: whether they are real. Where no root lies within the joint tolerance
-    ``tol_u`` of an end, the roots tell (an annulus, ``n_r = 0``, has one
-    crossing: its double root is no pair); else the sides of the segment's
-    end points, shared with its neighbours (:func:`_joint_sides`). Packets
-    without such a lane skip that work."""
-    odd = dr.select(n_r == 0, off1 <= 0, real & ((off1 <= 0) != (off2 <= 0)))
-    at_joint = active & ((dr.abs(off1) <= tol_u) | (dr.abs(off2) <= tol_u))
-    if at_joint:
-        side_start, side_end = _joint_sides(data, ray, seg, at_joint)
+def _moved_sides(data: PolylineData, ray: _Ray, seg: mi.UInt32, active: mi.Bool):
+    """Whether the start and the end of segment ``seg``, moved into the solid
+    (``_side_points``), lie outside the ray's surface of revolution."""
+    moved_start = mi.Bool(False)  # the moved start is outside
+    moved_end = mi.Bool(False)    # the moved end is outside
+    if active:
+        moved = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in range(4, 8)]
+        radius2, ray2 = _side_terms(ray, moved[0], moved[1])
+        moved_start = radius2 > ray2
+        radius2, ray2 = _side_terms(ray, moved[2], moved[3])
+        moved_end = radius2 > ray2
+    return moved_start, moved_end
+
+
+@dr.syntax
+def _crossing_parity(data: PolylineData, ray: _Ray, seg, has_root, active):
+    """Whether the ray crosses segment ``seg`` an odd number of times: its
+    end points lie on different sides of the ray's surface of revolution
+    (:func:`_joint_sides`). Every segment decides so, never from its roots:
+    the sides of a joint are evaluated bit for bit alike by both segments
+    that meet there, so the parities of all segments add up to an even
+    number of crossings for every line. A ray whose line misses the
+    segment's cone (``has_root`` false, with the tolerance of ``_roots``)
+    crosses it an even number of times; packets without a lane that meets
+    the cone skip the side tests."""
+    odd = mi.Bool(False)
+    test = active & has_root
+    if test:
+        side_start, side_end = _joint_sides(data, ray, seg, test)
         odd = side_start != side_end
     return odd
 
 
-def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s_best, active):
-    """The nearer of the roots ``s1``, ``s2`` that lies on segment ``seg``
-    (leaf record ``(rec0, rec1)``): ``(s, u, found)``, ``u`` the fraction
-    along the segment; ``real``: the roots are real (``disc >= 0``).
+def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root, active):
+    """The crossings of the ray's line with segment ``seg`` (leaf record
+    ``(rec0, rec1)``) among the roots ``s1``, ``s2``: ``(take1, take2, s1,
+    s2, u1, u2)``, ``u`` the fraction along the segment (unclipped);
+    ``real``: the roots are real (``disc >= 0``).
 
     Joints are half-open by construction: the parity of the segment's
-    crossings is fixed first (:func:`_crossing_parity`). Odd: exactly one
-    root is taken, the one nearest the segment (within the joint tolerance,
-    for float32 rounding of ``u``). Even: both roots or none, both within
-    the tolerance and real (a grazing ray that float32 cannot resolve
-    touches nothing). A crossing at a joint thus counts once, on the
-    segment that the shared end point's side gives it."""
+    crossings is fixed first (:func:`_crossing_parity`), and the roots only
+    say which crossings those are. Odd: exactly one root, the one nearest
+    the segment. Even: both roots when both lie on the segment up to the
+    joint tolerance (an annulus, ``n_r = 0``, has a double root: no pair),
+    else none (a grazing ray that float32 cannot resolve touches
+    nothing). A crossing at a joint thus counts once, on the segment that
+    the shared end point's side gives it, and every line crosses the
+    profile an even number of times."""
     n_r, n_z, c = rec0.x, rec0.y, rec0.z
     r0, z0, er, ez, tol_u = rec0.w, rec1.x, rec1.y, rec1.z, rec1.w
     tol_n = data.tol * n_r * n_r
@@ -455,21 +522,48 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s
 
     u1, off1 = off_segment(s1)
     u2, off2 = off_segment(s2)
-    odd = _crossing_parity(data, ray, seg, n_r, off1, off2, real, tol_u, active)
-    near1, near2 = off1 <= tol_u, off2 <= tol_u  # on the segment, up to tol_u
-    # Even: both roots, when both are on the segment (an annulus, n_r = 0,
-    # has one crossing: its double root is no pair); or, when the ray grazes
-    # the segment towards a joint, the root well inside it alone (its partner
-    # is lost to float32 rounding near the joint, past the tolerance).
-    pair = real & (n_r != 0) & near1 & near2
-    # Odd: the root nearer to the segment.
-    take1 = dr.select(odd, near1 & (off1 <= off2), pair | (real & (off1 <= -tol_u) & ~near2))
-    take2 = dr.select(odd, near2 & (off2 < off1), pair | (real & (off2 <= -tol_u) & ~near1))
-    ok1 = take1 & (s1 > ray.s_lo) & (s1 < s_best)
-    ok2 = take2 & (s2 > ray.s_lo) & (s2 < s_best)
+    odd = _crossing_parity(data, ray, seg, has_root, active)
+    pair = real & (n_r != 0) & (off1 <= tol_u) & (off2 <= tol_u)
+    first = off1 <= off2  # odd: s1 is the root nearer to the segment
+    take1, take2 = dr.select(odd, first, pair), dr.select(odd, ~first, pair)
+    # An odd segment's root off it (ill conditioned: a ray nearly along the
+    # segment's cone, through its joint) is moved to the segment's heights,
+    # where its crossing lies: else it could fall past the bounding cylinder.
+    move1, move2 = take1 & (off1 > tol_u), take2 & (off2 > tol_u)
+    s1, s2 = _to_heights(data, ray, z0, rec1.z, tol_u, s1, s2, move1, move2, active & (move1 | move2))
+    return take1, take2, s1, s2, u1, u2
+
+
+@dr.syntax
+def _to_heights(data: PolylineData, ray: _Ray, z0, ez, tol_u, s1, s2, move1, move2, active):
+    """``s1``, ``s2`` clipped (where ``move1``, ``move2``) to the interval of
+    ``s`` over which the ray passes the segment's heights, from ``z0`` to
+    ``z0 + ez L^2`` (``L = tol / tol_u``). Rare: packets without an active
+    lane skip it."""
+    if active:
+        z1 = dr.fma(ez, dr.square(data.tol / tol_u), z0)
+        s_z0 = (z0 - ray.o.z) * ray.inv_dz
+        s_z1 = (z1 - ray.o.z) * ray.inv_dz
+        lo, hi = dr.minimum(s_z0, s_z1), dr.maximum(s_z0, s_z1)
+        s1 = dr.select(move1, dr.clip(s1, lo, hi), s1)
+        s2 = dr.select(move2, dr.clip(s2, lo, hi), s2)
+    return s1, s2
+
+
+def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, has_root,
+                 best: _Key, active):
+    """The first crossing of segment ``seg`` (:func:`_segment_roots`) after
+    ``ray.after`` and before ``best`` in key order (:class:`_Key`): ``(s, u,
+    found, key, count)``, ``count`` the number of its crossings there."""
+    take1, take2, s1, s2, u1, u2 = _segment_roots(data, ray, seg, rec0, rec1, s1, s2, real,
+                                                  has_root, active)
+    key1, key2 = 2 * seg, 2 * seg + 1
+    ok1 = take1 & ray.after.before(s1, key1) & best.after(s1, key1)
+    ok2 = take2 & ray.after.before(s2, key2) & best.after(s2, key2)
     pick2 = ok2 & (~ok1 | (s2 < s1))
     ok = ok1 | ok2
-    return dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok
+    return (dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok,
+            dr.select(pick2, key2, key1), mi.UInt32(ok1) + mi.UInt32(ok2))
 
 
 # ---------------------------------------------------------------------------
@@ -477,6 +571,34 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, s
 # ---------------------------------------------------------------------------
 
 @dr.syntax
+def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
+    """The first crossing of ``ray`` after ``ray.after``, before its exit
+    from the bounding cylinder and ``tmax``: ``(hit, s, key)``; ``keyed``:
+    ties in ``s`` are broken by the key (:class:`_Key`), else by the order
+    of the traversal."""
+    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
+    key = dr.zeros(mi.UInt32, dr.width(s_best))  # its key (_Key)
+    seg = dr.zeros(mi.UInt32, dr.width(s_best))  # its segment
+    u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
+    found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
+    while ray.active & (node < ray.end):
+        node_next, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
+            data, ray, node, _Key(s_best, key if keyed else None), ray.active & (node < ray.end))
+        s_best = dr.select(hit, s_hit, s_best)
+        key = dr.select(hit, key_hit, key)
+        u = dr.select(hit, u_hit, u)
+        seg = dr.select(hit, seg_hit, seg)
+        found |= hit
+        node = node_next
+
+    t = ray.s_enter + s_best
+    valid = found & (t > 0) & (t < ray.tmax)
+    hit = PolylineHit(t=dr.select(valid, t * ray.t_scale, dr.inf), seg=seg,
+                      u=dr.clip(u, 0, 1), valid=valid)
+    return hit, s_best, key
+
+
 def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
                        tmax: mi.Float, active: mi.Bool) -> PolylineHit:
     """Nearest intersection with ``0 < t < tmax`` of the ray ``o + t d``.
@@ -485,25 +607,34 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     length and ``t`` is measured in units of ``d``. Traceable inside an outer
     symbolic loop (no evaluation happens here).
     """
-    ray = _Ray(data, o, d, tmax, active)
-    node = mi.UInt32(ray.first)          # current node of the threaded BVH
-    s_best = mi.Float(ray.s_hi)          # nearest hit so far (moved frame)
-    seg = dr.zeros(mi.UInt32, dr.width(s_best))  # its segment
-    u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
-    found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
-    while ray.active & (node < ray.end):
-        node_next, s_hit, u_hit, seg_hit, hit = _visit(
-            data, ray, node, s_best, ray.active & (node < ray.end))
-        s_best = dr.select(hit, s_hit, s_best)
-        u = dr.select(hit, u_hit, u)
-        seg = dr.select(hit, seg_hit, seg)
-        found |= hit
-        node = node_next
+    return _first_crossing(data, _Ray(data, o, d, tmax, active), False)[0]
 
-    t = ray.s_enter + s_best
-    valid = found & (t > 0) & (t < ray.tmax)
-    return PolylineHit(t=dr.select(valid, t * ray.t_scale, dr.inf), seg=seg,
-                       u=dr.clip(u, 0, 1), valid=valid)
+
+def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
+                           active: mi.Bool, after_s: mi.Float | None = None,
+                           after_key: mi.UInt32 | None = None
+                           ) -> tuple[PolylineHit, mi.Float, mi.UInt32]:
+    """The next crossing of the ray ``o + t d`` (``0 < t < tmax``) after the
+    one that a previous call with the same ``o``, ``d`` returned as
+    ``(after_s, after_key)`` (``None``: the first crossing, as
+    :func:`intersect_polyline`): ``(hit, s, key)``, ``(s, key)`` this
+    crossing's place to pass to the next call.
+
+    Walking a ray through its crossings this way, from its first origin and
+    without offsets, finds each crossing exactly once, also where two of
+    them are closer together than any offset or rounded to the same ``t``
+    (a corner): with the joint rule of :func:`_segment_roots` a ray from
+    outside the lathe then crosses it an even number of times.
+    """
+    ray = _Ray(data, o, d, tmax, active)
+    if after_s is not None:
+        later = after_s > ray.s_lo
+        ray.after = _Key(dr.select(later, after_s, ray.s_lo),
+                         dr.select(later, after_key, 0xFFFFFFFF))
+        ray.s_lo = ray.after.s  # boxes before it need no visit
+    else:
+        ray.after = _Key(ray.s_lo, mi.UInt32(0xFFFFFFFF))
+    return _first_crossing(data, ray, True)
 
 
 @dr.syntax
@@ -517,12 +648,31 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     node = mi.UInt32(ray.first)          # current node of the threaded BVH
     found = dr.zeros(mi.Bool, dr.width(node))  # whether any hit was found
     while ray.active & (node < ray.end) & ~found:
-        node_next, s_hit, _, _, hit = _visit(
-            data, ray, node, ray.s_hi, ray.active & (node < ray.end))
+        node_next, s_hit, _, _, hit, _, _ = _visit(
+            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
         node = node_next
     return found
+
+
+@dr.syntax
+def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
+                             active: mi.Bool) -> mi.UInt32:
+    """Number of crossings of the ray ``o + t d`` (``t > 0``) with the lathe,
+    every one that :func:`intersect_polyline` can report. For a ray that
+    starts outside the lathe's bounding cylinder that is the whole line, and
+    the number is even for every ray (the joint rule of
+    :func:`_segment_roots`): the watertightness tests count it."""
+    ray = _Ray(data, o, d, dr.full(mi.Float, dr.inf, dr.width(o)), active)
+    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    total = dr.zeros(mi.UInt32, dr.width(node))  # crossings so far
+    while ray.active & (node < ray.end):
+        node_next, _, _, _, _, _, count = _visit(
+            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
+        total += count
+        node = node_next
+    return total
 
 
 def polyline_geometry(data: PolylineData, p: mi.Point3f, seg: mi.UInt32,

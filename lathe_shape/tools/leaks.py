@@ -21,13 +21,20 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from functools import partial
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..kernels.bspline import build_bspline_data, intersect_bspline
-from ..kernels.polyline import PolylineData, build_polyline_data, intersect_polyline, polyline_geometry
+from ..kernels.polyline import (
+    PolylineData,
+    build_polyline_data,
+    intersect_polyline,
+    next_crossing_polyline,
+    polyline_geometry,
+)
 from . import reference as ref
 
 __all__ = [
@@ -37,6 +44,7 @@ __all__ = [
     "bspline_leak_rate",
     "parity_rays",
     "spawn_walk",
+    "crossing_walk",
     "scene_parity_leaks",
     "random_profile_leaks",
     "parity_summary",
@@ -235,29 +243,64 @@ def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
     return count.numpy().astype(np.int64), active.numpy()
 
 
+def crossing_walk(data: PolylineData, o: np.ndarray, d: np.ndarray,
+                  max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Follow rays through all their crossings with a polyline lathe (local
+    frame) the way an integrator can without offsets: every query keeps the
+    ray's first origin and asks for the crossing after the one just taken
+    (:func:`~lathe_shape.kernels.polyline.next_crossing_polyline`). Returns
+    ``(crossings, stuck)`` as :func:`spawn_walk`."""
+    o32 = mi.Point3f(o.T.astype(np.float32))
+    d32 = mi.Vector3f(d.T.astype(np.float32))
+    tmax = dr.full(mi.Float, dr.inf, len(o))
+    active = dr.full(mi.Bool, True, len(o))
+    count = dr.zeros(mi.UInt32, len(o))
+    after_s, after_key = None, None
+    for _ in range(max_hits):
+        hit, s, key = next_crossing_polyline(data, o32, d32, tmax, active, after_s, after_key)
+        active &= hit.valid
+        count += mi.UInt32(active)
+        after_s, after_key = s, key
+        dr.eval(after_s, after_key, active, count)
+        if not dr.any(active):
+            break
+    return count.numpy().astype(np.int64), active.numpy()
+
+
 def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
-                       chunk: int = 250_000) -> dict[str, int]:
+                       chunk: int = 250_000, kind: str | None = None) -> dict[str, int]:
     """Spawn-ray parity walk through the lathe of the profile file
     ``filename`` (a closed solid, local frame = world), in chunks of
-    ``chunk`` rays: the exact kernel (``ray_intersect_exact``) and Mitsuba's
+    ``chunk`` rays (``kind``: the lathe's profile kind, default the file's
+    own): the exact kernel (``ray_intersect_exact``) and Mitsuba's
     mesh of the lathe (``mesh_segments`` azimuthal steps, the scene's own
-    accelerator) on the same :func:`parity_rays`. Every ray starts outside,
-    so an odd number of crossings is a leak. Returns the counts ``rays``,
-    ``hitting_exact``, ``odd_exact``, ``stuck_exact`` and the same for
-    ``mesh``."""
-    scene = mi.load_dict({"type": "scene", "lathe": {"type": "lathe", "filename": filename,
-                                                     "mesh_segments": mesh_segments}})
+    accelerator) on the same :func:`parity_rays`, both walked with
+    ``si.spawn_ray`` (:func:`spawn_walk`), and the exact kernel walked
+    without offsets (``walk``: :func:`crossing_walk`, polyline profiles
+    only). Every ray starts outside, so an odd number of crossings is a
+    leak. Returns the counts ``rays``, ``hitting_exact``, ``odd_exact``,
+    ``stuck_exact`` and the same for ``mesh`` and ``walk``."""
+    lathe_props = {"type": "lathe", "filename": filename, "mesh_segments": mesh_segments}
+    scene = mi.load_dict({"type": "scene", "lathe": lathe_props | ({"kind": kind} if kind else {})})
     lathe = scene.shapes()[0]
     queries = {"exact": lathe.ray_intersect_exact,
                "mesh": lambda ray, active: scene.ray_intersect(ray, active=active)}
-    start, end = lathe.profile.segment_points()
+    walks = {name: partial(spawn_walk, query) for name, query in queries.items()}
+    if isinstance(lathe.surface.data, PolylineData):
+        walks["walk"] = partial(crossing_walk, lathe.surface.data)
+    if "walk" in walks:
+        start, end = lathe.profile.segment_points()
+    else:
+        # B-splines: the reference mesh's profile samples stand for vertices
+        points = lathe.surface.profile_samples[0]
+        start, end = points[:-1], points[1:]
     rng = np.random.default_rng(seed)
-    counts = {"rays": 0} | {f"{what}_{name}": 0 for name in queries for what in ("hitting", "odd", "stuck")}
+    counts = {"rays": 0} | {f"{what}_{name}": 0 for name in walks for what in ("hitting", "odd", "stuck")}
     for done in range(0, n, chunk):
         o, d = parity_rays(start, end, rng, min(chunk, n - done))
         counts["rays"] += len(o)
-        for name, query in queries.items():
-            crossings, stuck = spawn_walk(query, o, d)
+        for name, walk in walks.items():
+            crossings, stuck = walk(o, d)
             counts[f"hitting_{name}"] += int(np.sum(crossings > 0))
             counts[f"odd_{name}"] += int(np.sum(crossings % 2 == 1))
             counts[f"stuck_{name}"] += int(np.sum(stuck))
@@ -295,9 +338,12 @@ def random_profile_leaks(n_rays: int, seed: int = 2024,
 
 def parity_summary(name: str, counts: dict[str, int]) -> str:
     """One line of :func:`scene_parity_leaks` counts: odd (leaking) rays of
-    the exact kernel and of the mesh, per hitting ray."""
+    the exact kernel and of the mesh (spawn-ray walks) and of the exact
+    kernel walked without offsets, per hitting ray."""
     parts = [f"{name:14s} rays {counts['rays']:9d}"]
-    for kind in ("exact", "mesh"):
+    for kind in ("exact", "mesh", "walk"):
+        if f"hitting_{kind}" not in counts:
+            continue
         hits, odd = counts[f"hitting_{kind}"], counts[f"odd_{kind}"]
         parts.append(f"{kind}: hitting {hits:9d} odd {odd:5d} ({odd / max(hits, 1):.1e})"
                      + (f" stuck {counts[f'stuck_{kind}']}" if counts[f"stuck_{kind}"] else ""))
