@@ -51,6 +51,8 @@ def compare(args: argparse.Namespace) -> int:
           f"wrote {out}")
     print(f"difference: rel. MAE {errors['rel_mae']:.4f}, rel. RMSE {errors['rel_rmse']:.4f}, "
           f"bias {errors['bias']:+.4f}")
+    print(f"lathe_whitted's first render (kernel compilation or cache load included): "
+          f"{result.whitted_first_seconds:.2f} s")
     print(result.summary())
     return 0
 

@@ -38,6 +38,8 @@ class Comparison:
     povray_seconds: float
     whitted_seconds: float
     errors: dict[str, float]
+    #: lathe_whitted's first render, kernel compilation (or cache load) included.
+    whitted_first_seconds: float = float("nan")
 
     @property
     def ratio(self) -> float:
@@ -78,16 +80,19 @@ def render_povray(pov_file: str | os.PathLike, size: tuple[int, int], grid: int,
     return image, seconds
 
 
-def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple[np.ndarray, float]:
-    """Render with ``lathe_whitted`` (``filtered`` shadows, as POV-Ray's),
-    timed after a warm-up render: (image, seconds)."""
+def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple[np.ndarray, float, float]:
+    """Render with ``lathe_whitted`` (``filtered`` shadows, as POV-Ray's):
+    (image, seconds of a render after a warm-up render, seconds of the
+    warm-up render itself, which compiles or loads the kernels)."""
     import mitsuba as mi
 
     integrator = mi.load_dict({"type": "lathe_whitted", "max_depth": max_depth, "shadows": "filtered"})
+    start = time.perf_counter()
     mi.render(scene, spp=spp, seed=seed + 1, integrator=integrator).numpy()
+    first = time.perf_counter() - start
     start = time.perf_counter()
     image = mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
-    return image[..., :3], time.perf_counter() - start
+    return image[..., :3], time.perf_counter() - start, first
 
 
 def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 10,
@@ -102,5 +107,6 @@ def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 1
     grid = aa_grid(spp)
     size = tuple(int(v) for v in scene.sensors()[0].film().size())
     povray, povray_seconds = render_povray(pov_file, size, grid)
-    whitted, whitted_seconds = render_whitted(scene, grid * grid, seed, max_depth)
-    return Comparison(povray, whitted, povray_seconds, whitted_seconds, image_errors(whitted, povray))
+    whitted, whitted_seconds, first_seconds = render_whitted(scene, grid * grid, seed, max_depth)
+    return Comparison(povray, whitted, povray_seconds, whitted_seconds, image_errors(whitted, povray),
+                      first_seconds)
