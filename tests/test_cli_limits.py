@@ -13,7 +13,7 @@ from conftest import SCENES, VARIANT
 
 from lathe_shape.cli import common, compare, render
 from lathe_shape.cli.common import CliError, check_render_budget, interruptible, run_command
-from lathe_shape.tools.scenes import SceneError, set_film_size
+from lathe_shape.tools.scenes import SceneError, load_scene, set_film_size
 
 
 def run_body(capsys, error: BaseException) -> tuple[int, str]:
@@ -159,3 +159,33 @@ def test_set_film_size_keeps_lines():
         set_film_size("<scene><sensor/></scene>", (1, 1), "f.xml")
     with pytest.raises(SceneError, match=r"f.xml: not a valid XML file \(mismatched tag: line 2, column 2\)"):
         set_film_size("<scene><sensor>\n</scene>", (1, 1), "f.xml")
+
+
+def test_resolution_with_a_comment_quoting_a_command_line(tmp_path):
+    # Mitsuba accepts '--' inside a comment (strict XML does not): the
+    # resolution override must still apply, with the lines unchanged.
+    text = FILM.replace("<scene", "<!-- lathe-render this.xml --resolution 64x48 -->\n<scene", 1)
+    edited = set_film_size(text, (7, 5))
+    assert edited.splitlines()[0] == text.splitlines()[0]
+    assert edited.count('value="7"') == 2 and edited.count('value="5"') == 2
+    path = tmp_path / "commented.xml"
+    path.write_text('<!-- lathe-render commented.xml --resolution 64x48 -->\n<scene version="3.0.0">'
+                    '<sensor type="perspective"><film type="hdrfilm"/></sensor>'
+                    '<shape type="sphere"/></scene>', encoding="utf-8")
+    scene = load_scene(path, resolution=(64, 48))
+    assert tuple(scene.sensors()[0].film().size()) == (64, 48)
+
+
+def test_resolution_never_ignored(tmp_path):
+    # Text Mitsuba accepts but strict XML refuses (an unescaped '<' in an
+    # attribute): a requested resolution is an error, never silently dropped.
+    path = tmp_path / "lenient.xml"
+    path.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"/></sensor>'
+                    '<shape type="sphere" id="a<b"/></scene>', encoding="utf-8")
+    try:
+        load_scene(path)
+    except SceneError:
+        pytest.skip("Mitsuba refuses this text too")
+    expected = r"lenient.xml: not a valid XML file .*the resolution 64x48 cannot be set"
+    with pytest.raises(SceneError, match=expected):
+        load_scene(path, resolution=(64, 48))

@@ -26,6 +26,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from .scenes import blank_comments
+
 __all__ = [
     "BACKENDS",
     "OPTIX_WEIGHTS",
@@ -58,7 +60,7 @@ def box_filter_xml(xml_text: str, source: str = "scene") -> str:
     """The scene text with every film's reconstruction filter set to
     ``box`` (the filter a denoiser expects: independent pixel noise)."""
     try:
-        root = ET.fromstring(xml_text)
+        root = ET.fromstring(blank_comments(xml_text.encode("utf-8")))
     except ET.ParseError as e:
         raise DenoiseError(f"{source}: not a valid XML file ({e})") from None
     for film in root.iter("film"):

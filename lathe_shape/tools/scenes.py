@@ -14,6 +14,7 @@ import mitsuba as mi
 __all__ = [
     "SceneError",
     "SceneSyntaxError",
+    "blank_comments",
     "integrator_name",
     "lathe_ids",
     "load_scene",
@@ -36,7 +37,7 @@ class SceneSyntaxError(SceneError):
 
 def _parse_xml(xml_text: str, source: str) -> ET.Element:
     try:
-        return ET.fromstring(xml_text)
+        return ET.fromstring(blank_comments(xml_text.encode("utf-8")))
     except ET.ParseError as e:
         raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
 
@@ -56,10 +57,22 @@ def lathe_ids(xml_text: str, source: str = "scene") -> list[str]:
 _START_TAG = re.compile(rb"""<([^\s/>]+)(?:\s+[^\s=/>]+\s*=\s*(?:"[^"]*"|'[^']*'))*\s*(/?)>""")
 
 
+def blank_comments(data: bytes) -> bytes:
+    """``data`` with the text of every XML comment replaced by spaces (line
+    breaks kept, so every offset, line and column stays the same).
+
+    Mitsuba's XML parser accepts comments that strict XML refuses, such as
+    one quoting a command line (``--option`` holds a ``--``); the parsers
+    that edit scene files here are strict, so they read the scene this way."""
+    return re.sub(rb"<!--(.*?)-->", lambda m: b"<!--" + re.sub(rb"[^\n]", b" ", m.group(1)) + b"-->",
+                  data, flags=re.S)
+
+
 def _film_elements(data: bytes, source: str) -> list[tuple[int, dict[str, int]]]:
     """Where the films of the UTF-8 scene text ``data`` are: for each
     ``<film>`` directly inside a ``<sensor>``, the byte offset of its start
     tag and those of its ``width`` / ``height`` children (by name)."""
+    data = blank_comments(data)
     parser = expat.ParserCreate()
     films: list[tuple[int, dict[str, int]]] = []
     path: list[str] = []  # names of the open elements, outermost first
@@ -268,13 +281,14 @@ def load_scene(
     path = os.fspath(path)
     text = read_scene_text(path)
     defines = dict(defines or {})
+    strict_error = None  # why the text could not be edited, if it could not
     try:
         edited = text if edit is None else edit(text, path)
         try:
             if resolution is not None:
                 edited = set_film_size(edited, resolution, path)
-        except SceneSyntaxError:
-            edited = text  # Mitsuba reports where the syntax error is
+        except SceneSyntaxError as e:
+            edited, strict_error = text, e  # Mitsuba reports where the syntax error is
         if edited is text:
             scene = mi.load_file(path, parallel=parallel_load(text), **defines)
         else:
@@ -288,4 +302,10 @@ def load_scene(
         raise SceneError(f"{path}: could not load the scene:\n{_mitsuba_message(e, path)}") from None
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
+    if strict_error is not None:
+        # Mitsuba's parser took what strict XML refuses: never render at
+        # another resolution than the one asked for without a word.
+        width, height = resolution
+        raise SceneError(f"{strict_error}; the resolution {width}x{height} cannot be set in it "
+                         "(render without --resolution, or fix the XML)")
     return scene
