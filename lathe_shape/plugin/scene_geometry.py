@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from operator import attrgetter, is_not
 
 import drjit as dr
 import mitsuba as mi
@@ -40,6 +41,9 @@ from .interaction import lathe_interaction
 from .shape import LatheShape, scene_lathes
 
 __all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
+
+_SURFACE = attrgetter("surface")
+_MATRIX = attrgetter("to_world_matrix")
 
 
 class ExactSceneGeometry:
@@ -276,11 +280,13 @@ class LatheGroup:
         """Rebuild the transforms and the top-level BVH when a lathe moved
         (``set_to_world`` gives it a new matrix object), and everything
         when a lathe's profile changed (its ``points`` parameter)."""
-        if any(lathe.surface is not old for lathe, old in zip(self.lathes, self._surfaces, strict=True)):
+        # map/attrgetter/is_not: this runs at every query of every render,
+        # over all the lathes, so it stays out of Python-level loops.
+        if any(map(is_not, map(_SURFACE, self.lathes), self._surfaces)):
             self._build()
             return
-        matrices = [lathe.to_world_matrix for lathe in self.lathes]
-        if any(new is not old for new, old in zip(matrices, self._matrices, strict=True)):
+        matrices = list(map(_MATRIX, self.lathes))
+        if any(map(is_not, matrices, self._matrices)):
             self.set.set_transforms(np.stack(matrices))
             self._matrices = matrices
 
