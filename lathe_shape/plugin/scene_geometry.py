@@ -7,6 +7,14 @@ area emitters and textures are the same), Mitsuba traces it, and every lathe's
 exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
 reference triangles are therefore never reported.
 
+The surface interaction of a hit on those few shapes is computed by a direct
+call per shape (:func:`rest_interaction`), not by Mitsuba's virtual call over
+``mi.ShapePtr``: Dr.Jit records that call once for every shape alive in the
+process (lathes included, whether in this scene or not), on every render, and
+its cost grew with the lathe count far more than the lathes' own traversal.
+More than :data:`DIRECT_SHAPES` such shapes, or instances among them, go
+through Mitsuba's call as before.
+
 Lathes are intersected by kind (see kernels/top_level.py): a kind with
 several lathes goes through one :class:`~lathe_shape.kernels.top_level.LatheSet`
 (their profiles' kernel data concatenated, lathes of the same profile
