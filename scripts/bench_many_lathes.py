@@ -6,7 +6,9 @@ under a constant sky, rendered with ``lathe_path``. Every case runs in a
 fresh process, so its peak memory (ru_maxrss) is its own; the render time is
 the median of the renders after the first (which pays the JIT compilation:
 its time less the median is printed as the compile time), with their
-spread. A last line per reference and integrator gives the render-time
+spread, and the median CPU time of the process per render (all its threads:
+steadier than the wall time when other jobs share the cores; the ratios use
+it). A last line per reference and integrator gives the render-time
 ratio of the largest count to 256 lathes (the target of scenes of many
 lathes: at most 1.2 for ``lathe_path``); ``--integrators lathe_path path``
 adds Mitsuba's stock ``path`` on the same scenes (it traces the proxies).
@@ -85,15 +87,16 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
     scene = load_string_in(ROOT, scene_text(count, reference, *size, buried, shared))
     load = time.perf_counter() - start
     renderer = mi.load_dict({"type": integrator, "max_depth": 6})
-    times = []
+    times, cpu = [], []
     for seed in range(1 + repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         mi.render(scene, spp=spp, seed=seed, integrator=renderer).numpy()
         times.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     later = sorted(times[1:])
     return {"load": load, "first": times[0], "render": float(statistics.median(later)),
-            "spread": (later[0], later[-1]), "peak_mb": peak}
+            "spread": (later[0], later[-1]), "cpu": float(statistics.median(cpu[1:])), "peak_mb": peak}
 
 
 def main() -> None:
@@ -123,7 +126,7 @@ def main() -> None:
           f"one process per case{', glasses after the 256th buried' if args.buried else ''}, "
           f"{'a BSDF per glass' if args.own_bsdfs else 'one shared glass BSDF'}")
     print(f"{'integrator':>11}{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}"
-          f"{'compile [s]':>13}{'render [s]':>12}{'(min-max)':>14}{'vs 256':>8}")
+          f"{'compile [s]':>13}{'render [s]':>12}{'(min-max)':>14}{'cpu [s]':>9}{'vs 256':>8}")
     for reference in args.references:
         for integrator in args.integrators:
             run_series(args, reference, integrator)
@@ -144,15 +147,17 @@ def run_series(args: argparse.Namespace, reference: str, integrator: str) -> Non
             print(f"{integrator:>11}{count:>7}{reference:>10}  failed: {error}")
             continue
         r = json.loads(result.stdout.strip().splitlines()[-1])
-        renders[count] = r["render"]
-        ratio = f"{r['render'] / renders[256]:7.2f}x" if 256 in renders else "      -"
+        renders[count] = r["cpu"]
+        ratio = f"{r['cpu'] / renders[256]:7.2f}x" if 256 in renders else "      -"
         spread = f"({r['spread'][0]:.2f}-{r['spread'][1]:.2f})"
         print(f"{integrator:>11}{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}"
-              f"{r['first'] - r['render']:>13.2f}{r['render']:>12.3f}{spread:>14}{ratio:>8}", flush=True)
+              f"{r['first'] - r['render']:>13.2f}{r['render']:>12.3f}{spread:>14}{r['cpu']:>9.3f}{ratio:>8}",
+              flush=True)
     largest = max(renders, default=None)
     if 256 in renders and largest != 256:
-        print(f"{integrator} {reference}: render time {largest} / 256 lathes = "
+        print(f"{integrator} {reference}: render CPU time {largest} / 256 lathes = "
               f"{renders[largest] / renders[256]:.2f}x (target for lathe_path: at most 1.2x)")
+
 
 if __name__ == "__main__":
     main()
