@@ -6,13 +6,18 @@ under a constant sky, rendered with ``lathe_path``. Every case runs in a
 fresh process, so its peak memory (ru_maxrss) is its own; the render time is
 the median of the renders after the first (which pays the JIT compilation:
 its time less the median is printed as the compile time), with their
-spread. A last line per reference gives the render-time ratio of the largest
-count to 256 lathes (the target of scenes of many lathes: at most 1.2).
+spread, and the median CPU time of the process per render (all its threads:
+steadier than the wall time when other jobs share the cores; the ratios use
+it). A last line per reference and integrator gives the render-time
+ratio of the largest count to 256 lathes (the target of scenes of many
+lathes: at most 1.2 for ``lathe_path``); ``--integrators lathe_path path``
+adds Mitsuba's stock ``path`` on the same scenes (it traces the proxies).
 Scenes load through `tools.scenes.load_string_in`, which loads scenes of more
 than 64 lathes sequentially (in parallel, hundreds of lathes exceed Python's
 recursion limit).
 
     python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy] [--buried]
+                                        [--integrators lathe_path path]
                                         [--resolution 128x128] [--spp 4] [--repeats 3]
                                         [--variant llvm_ad_rgb]
 """
@@ -66,9 +71,10 @@ def scene_text(count: int, reference: str, width: int, height: int, buried: bool
 
 
 def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant: str,
-            repeats: int, buried: bool = False, shared: bool = True) -> dict:
+            repeats: int, buried: bool = False, shared: bool = True, integrator: str = "lathe_path") -> dict:
     """One case, in this process: load time, first render time, median and
-    spread of ``repeats`` further renders, peak RSS."""
+    spread of ``repeats`` further renders with ``integrator`` (max_depth 6),
+    peak RSS."""
     import resource
 
     import mitsuba as mi
@@ -80,16 +86,17 @@ def measure(count: int, reference: str, size: tuple[int, int], spp: int, variant
     start = time.perf_counter()
     scene = load_string_in(ROOT, scene_text(count, reference, *size, buried, shared))
     load = time.perf_counter() - start
-    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 6})
-    times = []
+    renderer = mi.load_dict({"type": integrator, "max_depth": 6})
+    times, cpu = [], []
     for seed in range(1 + repeats):
-        start = time.perf_counter()
-        mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
+        start, start_cpu = time.perf_counter(), time.process_time()
+        mi.render(scene, spp=spp, seed=seed, integrator=renderer).numpy()
         times.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     later = sorted(times[1:])
     return {"load": load, "first": times[0], "render": float(statistics.median(later)),
-            "spread": (later[0], later[-1]), "peak_mb": peak}
+            "spread": (later[0], later[-1]), "cpu": float(statistics.median(cpu[1:])), "peak_mb": peak}
 
 
 def main() -> None:
@@ -99,6 +106,8 @@ def main() -> None:
     parser.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1000])
     parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"])
     add_render_options(parser, spp_default=4, resolution_default="128x128", defines=False)
+    parser.add_argument("--integrators", nargs="+", default=["lathe_path"], choices=["lathe_path", "path"],
+                        help="integrators to time (default: lathe_path; path: Mitsuba's own, on the proxies)")
     parser.add_argument("--repeats", type=int, default=3, help="renders timed after the first (default: 3)")
     parser.add_argument("--buried", action="store_true",
                         help="glasses after the 256th under the floor: the image of 256, the cost of more")
@@ -109,36 +118,45 @@ def main() -> None:
     args = parser.parse_args()
     size = parse_resolution(args.resolution)
     if args.case:
-        count, reference = args.case.split(":")
+        count, reference, integrator = args.case.split(":")
         print(json.dumps(measure(int(count), reference, size, args.spp, args.variant, args.repeats,
-                                 args.buried, not args.own_bsdfs)))
+                                 args.buried, not args.own_bsdfs, integrator)))
         return
-    print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, lathe_path max_depth 6, "
+    print(f"variant {args.variant}, {size[0]}x{size[1]}, {args.spp} spp, max_depth 6, "
           f"one process per case{', glasses after the 256th buried' if args.buried else ''}, "
           f"{'a BSDF per glass' if args.own_bsdfs else 'one shared glass BSDF'}")
-    print(f"{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}{'compile [s]':>13}"
-          f"{'render [s]':>12}{'(min-max)':>14}{'vs 256':>8}")
+    print(f"{'integrator':>11}{'lathes':>7}{'reference':>10}{'load [s]':>10}{'peak [MB]':>11}"
+          f"{'compile [s]':>13}{'render [s]':>12}{'(min-max)':>14}{'cpu [s]':>9}{'vs 256':>8}")
     for reference in args.references:
-        renders = {}
-        for count in args.counts:
-            command = [sys.executable, __file__, "--case", f"{count}:{reference}", "--resolution",
-                       args.resolution, "--spp", str(args.spp), "--repeats", str(args.repeats),
-                       "--variant", args.variant] + (["--buried"] if args.buried else []) \
-                + (["--own-bsdfs"] if args.own_bsdfs else [])
-            result = subprocess.run(command, capture_output=True, text=True)
-            if result.returncode != 0:
-                print(f"{count:>7}{reference:>10}  failed: {result.stderr.strip().splitlines()[-1:]}")
-                continue
-            r = json.loads(result.stdout.strip().splitlines()[-1])
-            renders[count] = r["render"]
-            ratio = f"{r['render'] / renders[256]:7.2f}x" if 256 in renders else "      -"
-            spread = f"({r['spread'][0]:.2f}-{r['spread'][1]:.2f})"
-            print(f"{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}"
-                  f"{r['first'] - r['render']:>13.2f}{r['render']:>12.3f}{spread:>14}{ratio:>8}", flush=True)
-        largest = max(renders, default=None)
-        if 256 in renders and largest != 256:
-            print(f"{reference}: render time {largest} / 256 lathes = {renders[largest] / renders[256]:.2f}x "
-                  "(target: at most 1.2x)")
+        for integrator in args.integrators:
+            run_series(args, reference, integrator)
+
+
+def run_series(args: argparse.Namespace, reference: str, integrator: str) -> None:
+    """Print one line per lathe count (each in a fresh process) and the
+    ratio of the largest count to 256."""
+    renders = {}
+    for count in args.counts:
+        command = [sys.executable, __file__, "--case", f"{count}:{reference}:{integrator}", "--resolution",
+                   args.resolution, "--spp", str(args.spp), "--repeats", str(args.repeats),
+                   "--variant", args.variant] + (["--buried"] if args.buried else []) \
+            + (["--own-bsdfs"] if args.own_bsdfs else [])
+        result = subprocess.run(command, capture_output=True, text=True)
+        if result.returncode != 0:
+            error = result.stderr.strip().splitlines()[-1:]
+            print(f"{integrator:>11}{count:>7}{reference:>10}  failed: {error}")
+            continue
+        r = json.loads(result.stdout.strip().splitlines()[-1])
+        renders[count] = r["cpu"]
+        ratio = f"{r['cpu'] / renders[256]:7.2f}x" if 256 in renders else "      -"
+        spread = f"({r['spread'][0]:.2f}-{r['spread'][1]:.2f})"
+        print(f"{integrator:>11}{count:>7}{reference:>10}{r['load']:>10.2f}{r['peak_mb']:>11.0f}"
+              f"{r['first'] - r['render']:>13.2f}{r['render']:>12.3f}{spread:>14}{r['cpu']:>9.3f}{ratio:>8}",
+              flush=True)
+    largest = max(renders, default=None)
+    if 256 in renders and largest != 256:
+        print(f"{integrator} {reference}: render CPU time {largest} / 256 lathes = "
+              f"{renders[largest] / renders[256]:.2f}x (target for lathe_path: at most 1.2x)")
 
 
 if __name__ == "__main__":

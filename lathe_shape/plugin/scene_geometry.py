@@ -7,6 +7,14 @@ area emitters and textures are the same), Mitsuba traces it, and every lathe's
 exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
 reference triangles are therefore never reported.
 
+The surface interaction of a hit on those few shapes is computed by a direct
+call per shape (:func:`rest_interaction`), not by Mitsuba's virtual call over
+``mi.ShapePtr``: Dr.Jit records that call once for every shape alive in the
+process (lathes included, whether in this scene or not), on every render, and
+its cost grew with the lathe count far more than the lathes' own traversal.
+More than :data:`DIRECT_SHAPES` such shapes, or instances among them, go
+through Mitsuba's call as before.
+
 Lathes are intersected by kind (see kernels/top_level.py): a kind with
 several lathes goes through one :class:`~lathe_shape.kernels.top_level.LatheSet`
 (their profiles' kernel data concatenated, lathes of the same profile
@@ -29,6 +37,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from operator import attrgetter, is_not
 
 import drjit as dr
 import mitsuba as mi
@@ -40,6 +49,9 @@ from .interaction import lathe_interaction
 from .shape import LatheShape, scene_lathes
 
 __all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
+
+_SURFACE = attrgetter("surface")
+_MATRIX = attrgetter("to_world_matrix")
 
 
 class ExactSceneGeometry:
@@ -64,6 +76,10 @@ class ExactSceneGeometry:
         self.groups = [LatheGroup(group) for group in by_kind.values() if len(group) > 1]
         if any(s.class_name() == "Instance" for s in others):
             self._refuse_instanced_lathes(scene)
+        #: The non-lathe shapes whose surface interaction is computed by a
+        #: direct call each (see :func:`rest_interaction`); ``None``: by
+        #: Mitsuba's own call (too many of them, or instances).
+        self.direct = others if direct_interaction(others) else None
         if not self.lathes:
             self.rest = scene
         else:
@@ -156,7 +172,11 @@ class ExactSceneGeometry:
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
         self.follow_moves()
-        si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        if self.direct is None or not self.lathes:
+            si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        else:
+            pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
+            si = rest_interaction(self.direct, ray, pi, active)
         for lathe in self.single:
             ray_lathe = mi.Ray3f(ray)
             ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
@@ -176,6 +196,44 @@ class ExactSceneGeometry:
         for group in self.groups:
             occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
+
+
+#: Most non-lathe shapes whose surface interactions are computed by direct
+#: calls rather than by Mitsuba's virtual call (which traces every shape
+#: alive, lathes included, on each render).
+DIRECT_SHAPES = 8
+
+
+def direct_interaction(shapes: list[mi.Shape]) -> bool:
+    """Whether :func:`rest_interaction` can serve ``shapes``: few of them,
+    none an instance (whose hits name the instance, not the shape)."""
+    return len(shapes) <= DIRECT_SHAPES and all(s.class_name() != "Instance" for s in shapes)
+
+
+def rest_interaction(shapes: list[mi.Shape], ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
+                     active: mi.Bool) -> mi.SurfaceInteraction3f:
+    """Mitsuba's ``pi.compute_surface_interaction(ray)`` for a scene made of
+    ``shapes``, with one direct call per shape instead of the virtual call
+    over ``mi.ShapePtr``: Dr.Jit records that call for every shape
+    registered in the process (a thousand lathes' proxies included) on
+    every render, though only these can be hit."""
+    active = mi.Bool(active) & pi.is_valid()
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    for shape in shapes:
+        here = active & (pi.shape == mi.ShapePtr(shape))
+        si = dr.select(here, shape.compute_surface_interaction(ray, pi, mi.RayFlags.All, here), si)
+    # What SurfaceInteraction::finalize_surface_interaction does after the call.
+    si.t = dr.select(active, si.t, dr.inf)
+    valid = active & si.is_valid()
+    si.shape = dr.select(valid, si.shape, mi.ShapePtr(None))
+    si.instance = dr.select(valid, si.instance, mi.ShapePtr(None))
+    si.time = ray.time
+    si.wavelengths = ray.wavelengths
+    si.initialize_sh_frame()
+    si.wi = dr.select(valid, si.to_local(-ray.d), -ray.d)
+    si.duv_dx = dr.zeros(mi.Point2f)
+    si.duv_dy = dr.zeros(mi.Point2f)
+    return si
 
 
 def profile_key(lathe: LatheShape) -> tuple:
@@ -230,11 +288,13 @@ class LatheGroup:
         """Rebuild the transforms and the top-level BVH when a lathe moved
         (``set_to_world`` gives it a new matrix object), and everything
         when a lathe's profile changed (its ``points`` parameter)."""
-        if any(lathe.surface is not old for lathe, old in zip(self.lathes, self._surfaces, strict=True)):
+        # map/attrgetter/is_not: this runs at every query of every render,
+        # over all the lathes, so it stays out of Python-level loops.
+        if any(map(is_not, map(_SURFACE, self.lathes), self._surfaces)):
             self._build()
             return
-        matrices = [lathe.to_world_matrix for lathe in self.lathes]
-        if any(new is not old for new, old in zip(matrices, self._matrices, strict=True)):
+        matrices = list(map(_MATRIX, self.lathes))
+        if any(map(is_not, matrices, self._matrices)):
             self.set.set_transforms(np.stack(matrices))
             self._matrices = matrices
 
