@@ -189,3 +189,31 @@ def test_new_points_rebuild_the_set():
     # The other lathe keeps its profile.
     ray.o = mi.Point3f(5.0, 0.0, 1.0)
     assert geometry.ray_intersect(ray, mi.Bool(True)).t[0] == pytest.approx(4.0, rel=1e-5)
+
+
+def test_direct_rest_interaction_equals_mitsubas():
+    # The non-lathe hits' interaction computed by direct calls (no ShapePtr
+    # call over every shape alive) is Mitsuba's own, field for field.
+    from lathe_shape.plugin.scene_geometry import rest_interaction
+
+    scene = mi.load_dict({
+        "type": "scene",
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale(40)},
+        "ball": {"type": "sphere", "center": [0, 0, 5]},
+        "box": {"type": "cube",
+                "to_world": mi.ScalarTransform4f().translate([6, 0, 2]).rotate([1, 1, 0], 30)},
+    })
+    rng = np.random.default_rng(3)
+    n = 20000
+    o = mi.Point3f(*(rng.normal(size=(3, n)) * 10 + np.array([[0], [0], [15]])))
+    ray = mi.Ray3f(o, dr.normalize(mi.Vector3f(*rng.normal(size=(3, n)))))
+    expected = scene.ray_intersect(ray, mi.RayFlags.All, False, True)
+    preliminary = scene.ray_intersect_preliminary(ray, False, True)
+    got = rest_interaction(list(scene.shapes()), ray, preliminary, mi.Bool(True))
+    assert 0.2 < expected.is_valid().numpy().mean() < 0.95
+    for field in ("t", "p", "n", "uv", "dp_du", "dp_dv", "wi", "prim_index"):
+        np.testing.assert_array_equal(np.array(getattr(got, field)), np.array(getattr(expected, field)),
+                                      err_msg=field)
+    np.testing.assert_array_equal(np.array(got.sh_frame.n), np.array(expected.sh_frame.n))
+    np.testing.assert_array_equal(np.array(got.sh_frame.s), np.array(expected.sh_frame.s))
+    np.testing.assert_array_equal(got.shape == expected.shape, np.full(n, True))
