@@ -12,8 +12,10 @@ call per shape (:func:`rest_interaction`), not by Mitsuba's virtual call over
 ``mi.ShapePtr``: Dr.Jit records that call once for every shape alive in the
 process (lathes included, whether in this scene or not), on every render, and
 its cost grew with the lathe count far more than the lathes' own traversal.
-More than :data:`DIRECT_SHAPES` such shapes, or instances among them, go
-through Mitsuba's call as before.
+This is done in scenes of at least :data:`DIRECT_LATHES` lathes: with few
+shapes alive Mitsuba's call is the faster (a one-lathe scene renders about
+5% slower through the direct calls). More than :data:`DIRECT_SHAPES` such
+shapes, or instances among them, go through Mitsuba's call as well.
 
 Lathes are intersected by kind (see kernels/top_level.py): a kind with
 several lathes goes through one :class:`~lathe_shape.kernels.top_level.LatheSet`
@@ -79,7 +81,7 @@ class ExactSceneGeometry:
         #: The non-lathe shapes whose surface interaction is computed by a
         #: direct call each (see :func:`rest_interaction`); ``None``: by
         #: Mitsuba's own call (too many of them, or instances).
-        self.direct = others if direct_interaction(others) else None
+        self.direct = others if direct_interaction(others, len(self.lathes)) else None
         if not self.lathes:
             self.rest = scene
         else:
@@ -202,12 +204,17 @@ class ExactSceneGeometry:
 #: calls rather than by Mitsuba's virtual call (which traces every shape
 #: alive, lathes included, on each render).
 DIRECT_SHAPES = 8
+#: The fewest lathes in a scene for which :func:`rest_interaction` is used.
+DIRECT_LATHES = 32
 
 
-def direct_interaction(shapes: list[mi.Shape]) -> bool:
-    """Whether :func:`rest_interaction` can serve ``shapes``: few of them,
-    none an instance (whose hits name the instance, not the shape)."""
-    return len(shapes) <= DIRECT_SHAPES and all(s.class_name() != "Instance" for s in shapes)
+def direct_interaction(shapes: list[mi.Shape], lathe_count: int = DIRECT_LATHES) -> bool:
+    """Whether :func:`rest_interaction` should serve ``shapes`` in a scene
+    of ``lathe_count`` lathes: many lathes (see the module docstring), few
+    other shapes, none an instance (whose hits name the instance, not the
+    shape)."""
+    return (lathe_count >= DIRECT_LATHES and len(shapes) <= DIRECT_SHAPES
+            and all(s.class_name() != "Instance" for s in shapes))
 
 
 def rest_interaction(shapes: list[mi.Shape], ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
