@@ -182,11 +182,13 @@ def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
 
 def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
     """Polylines: the arcs of the joint circles between two cones that face
-    the camera differently (one front-, one back-facing)."""
+    the camera differently (one front-, one back-facing). One projection for
+    all arcs."""
     profile = lathe.profile
     _, p1 = profile.segment_points()
     normals = profile.segment_normals()
     m = profile.segment_count
+    arcs = []  # (segment, r, z, lower edges, upper edges) of every arc
     for k in range(m):
         j = (k + 1) % m
         if profile.segments[k, 1] != profile.segments[j, 0] or (j == 0 and not profile.closed_loop):
@@ -197,13 +199,16 @@ def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> 
         for lo, hi in _facing_arcs(r, z, [normals[k], normals[j]], camera):
             count = int(np.clip(np.ceil(_DENSITY * (hi - lo) * r * size), 2, 8192))
             edges = np.linspace(lo, hi, count + 1)
-            phi = 0.5 * (edges[:-1] + edges[1:])
-            ring = np.full(count, r), np.full(count, z)
-            x_lo, x_hi, x_mid = (_project(sensor, _world(lathe, *ring, a))
-                                 for a in (edges[:-1], edges[1:], phi))
-            step = x_hi - x_lo
-            normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
-            out.add(lathe, np.full(count, k), np.ones(count), phi, normal_dl, x_mid)
+            arcs.append((np.full(count, k), np.full(count, r), np.full(count, z), edges[:-1], edges[1:]))
+    if not arcs:
+        return
+    seg, r, z, lo, hi = (np.concatenate(column) for column in zip(*arcs, strict=True))
+    phi = 0.5 * (lo + hi)
+    world = np.concatenate([_world(lathe, r, z, azimuth) for azimuth in (lo, hi, phi)])
+    x_lo, x_hi, x_mid = np.split(_project(sensor, world), 3)
+    step = x_hi - x_lo
+    normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
+    out.add(lathe, seg, np.ones(len(seg)), phi, normal_dl, x_mid)
 
 
 def outline_samples(sensor: mi.Sensor, lathes: list[LatheShape]) -> OutlineSamples:
