@@ -241,27 +241,50 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
     return ds.uv, it.p
 
 
-def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray,
-                                normal_dl: np.ndarray, seed: int, spp: int) -> np.ndarray:
-    """``(f(x - eps n) - f(x + eps n)) dl`` (the side the outward normal
-    points away from first), (n, channels): the integrator's primal
-    radiance of camera rays at both sides, averaged over ``spp`` samples."""
+def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray, normal_dl: np.ndarray,
+                   seed: int, spp: int) -> mi.Spectrum:
+    """The integrator's primal radiance (times the sensor weight, not yet
+    evaluated) of camera rays at ``x - eps n`` and ``x + eps n``, ``spp``
+    rounds of both."""
     width, height = sensor.film().crop_size()
-    length = np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
-    offset = _EPSILON * normal_dl / length
-    positions = np.concatenate([x - offset, x + offset])
-    positions = np.tile(positions, (spp, 1))
-    count = len(positions)
+    offset = _EPSILON * normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    positions = np.tile(np.concatenate([x - offset, x + offset]), (spp, 1))
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
-    sampler.seed(dr.opaque(mi.UInt32, seed), count)
+    sampler.seed(dr.opaque(mi.UInt32, seed), len(positions))
     pos = mi.Point2f(*(positions / [width, height]).T.astype(np.float32))
     ray, weight = sensor.sample_ray(0.0, sampler.next_1d(), pos, sampler.next_2d())
     radiance = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
                                  depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
                                  active=mi.Bool(True))[0]
-    values = np.array(weight * radiance).T.reshape(spp, 2, len(x), -1).mean(axis=0)
-    return (values[0] - values[1]) * length
+    return weight * radiance
+
+
+def _difference(radiance: mi.Spectrum, normal_dl: np.ndarray, spp: int) -> np.ndarray:
+    """``(f_in - f_out) dl`` (n, channels) from :func:`_side_radiance`."""
+    length = np.linalg.norm(normal_dl, axis=1, keepdims=True)
+    values = np.array(radiance).T.reshape(spp, 2, len(normal_dl), -1).mean(axis=0)
+    return (values[0] - values[1]) * np.maximum(length, 1e-30)
+
+
+def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray,
+                                normal_dl: np.ndarray, seed: int, spp: int) -> np.ndarray:
+    """``(f(x - eps n) - f(x + eps n)) dl`` (the side the outward normal
+    points away from first), (n, channels): the integrator's primal
+    radiance of camera rays at both sides, averaged over ``spp`` samples."""
+    return _difference(_side_radiance(scene, sensor, integrator, x, normal_dl, seed, spp), normal_dl, spp)
+
+
+def _hidden(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.Point3f) -> mi.Bool:
+    """Whether something lies between the camera and the (detached) world
+    points (not yet evaluated)."""
+    origin = sensor.world_transform() @ mi.Point3f(0.0)
+    to_point = points - origin
+    distance = dr.norm(to_point)
+    ray = mi.Ray3f(origin, to_point / distance)
+    # A ray to a tangent point may graze the surface just before it
+    ray.maxt = distance * 0.99
+    return integrator.geometry(scene).ray_test(ray, mi.Bool(True))
 
 
 def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.Point3f) -> np.ndarray:
@@ -270,13 +293,7 @@ def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.P
     lathe, or behind other shapes) move no visible edge; their difference
     either side would only pick up the shading gradient of what hides
     them."""
-    origin = sensor.world_transform() @ mi.Point3f(0.0)
-    to_point = points - origin
-    distance = dr.norm(to_point)
-    ray = mi.Ray3f(origin, to_point / distance)
-    # A ray to a tangent point may graze the surface just before it
-    ray.maxt = distance * 0.99
-    return ~np.array(integrator.geometry(scene).ray_test(ray, mi.Bool(True)))
+    return ~np.array(_hidden(integrator, scene, sensor, points))
 
 
 def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int):
@@ -290,10 +307,14 @@ def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, sp
     width, height = sensor.film().crop_size()
     x = np.concatenate([part[5] for part in parts])
     normal_dl = np.concatenate([part[4] for part in parts])
-    weight = outline_radiance_difference(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
     positions = [attached_outline_positions(sensor, *part[:4]) for part in parts]
-    world = np.concatenate([np.array(dr.detach(points)).T for _, points in positions])
-    weight *= outline_visible(integrator, scene, sensor, mi.Point3f(*world.T.astype(np.float32)))[:, None]
+    # The side radiance and the visibility of the outline points
+    # (outline_visible) in one evaluation
+    hidden = [_hidden(integrator, scene, sensor, dr.detach(points)) for _, points in positions]
+    radiance = _side_radiance(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
+    dr.eval(radiance, *hidden)
+    weight = _difference(radiance, normal_dl, spp)
+    weight *= ~np.concatenate([np.array(mask) for mask in hidden])[:, None]
     start = 0
     for (_, seg, _, _, part_normal_dl, part_x), (position, _) in zip(parts, positions, strict=True):
         unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
