@@ -296,12 +296,16 @@ def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.P
     return ~np.array(_hidden(integrator, scene, sensor, points))
 
 
-def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int):
-    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces,
-    their detached weight ``(f_in - f_out) dl`` (n, channels) and their
-    attached ``n . x``. The radiance either side of all pieces is traced in
-    one wavefront, with a seed of its own (independent of the image's)."""
-    parts = outline_samples(sensor, differentiable_lathes(integrator.geometry(scene).lathes)).merged()
+def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
+                   samples: OutlineSamples | None = None):
+    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces
+    (``samples``, default :func:`outline_samples`), their detached weight
+    ``(f_in - f_out) dl`` (n, channels) and their attached ``n . x``. The
+    radiance either side of all pieces is traced in one wavefront, with a
+    seed of its own (independent of the image's)."""
+    if samples is None:
+        samples = outline_samples(sensor, differentiable_lathes(integrator.geometry(scene).lathes))
+    parts = samples.merged()
     if not parts:
         return
     width, height = sensor.film().crop_size()
@@ -343,10 +347,11 @@ def outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
 
 
 def outline_backward(integrator, scene: mi.Scene, sensor: mi.Sensor, grad_in: np.ndarray, seed: int,
-                     spp: int) -> None:
+                     spp: int, samples: OutlineSamples | None = None) -> None:
     """Reverse mode: accumulate the outline part of the gradient of
-    ``sum(grad_in * image)`` into the lathes' ``points``."""
-    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
+    ``sum(grad_in * image)`` into the lathes' ``points`` (outline pieces
+    ``samples``, default :func:`outline_samples`)."""
+    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp, samples):
         if not dr.grad_enabled(speed):
             continue
         channels = min(weight.shape[1], grad_in.shape[2])
