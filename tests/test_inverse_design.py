@@ -68,7 +68,7 @@ def test_recover_bspline_vase():
 @FULL
 @pytest.mark.parametrize("seed", [0, 2])
 def test_recover_polyline_glass(seed):
-    # Measured over the seeds 0-4: 0.58-0.74% of the height (README,
+    # Measured over the seeds 0-6: 0.58-0.74% of the height (README,
     # "Differentiable lathes")
     result = recover_profile(HIDDEN_PROFILES["polyline"], "polyline", iterations=60, resolution=32, spp=16,
                              seed=seed)
