@@ -1,9 +1,9 @@
 """Inverse design of lathe profiles from two rendered views.
 
-The quick tests check the projection, the error measure and a few
-optimisation steps. The full recoveries (B-spline vase below 1% of the
-height, polyline glass below 2%) take 30-70 s each on a shared 2-core CPU
-and run when LATHE_INVERSE_TESTS=1."""
+The quick tests check the projection, the error measure and that a few
+optimisation steps cut the profile error and the loss. The full recoveries
+(B-spline vase and polyline glass, two seeds, each below 1% of the height)
+take 20-60 s each on a 2-core CPU and run when LATHE_INVERSE_TESTS=1."""
 
 from __future__ import annotations
 
@@ -47,23 +47,30 @@ def test_profile_error_measure():
 
 
 def test_few_steps_reduce_the_profile_error():
-    result = recover_profile(HIDDEN_PROFILES["polyline"], "polyline", iterations=6, resolution=16, spp=4)
-    start_error = profile_rms_error(cylinder_like(HIDDEN_PROFILES["polyline"]), HIDDEN_PROFILES["polyline"],
-                                    "polyline")
-    assert result.errors[-1] < 0.8 * start_error
-    assert result.losses[-1] < result.losses[0]
+    # Five steps at 16x16 pixels and 2 spp: measured 6.9% -> 3.9% of the
+    # height (1.8x) and a loss 3.2x lower
+    target = HIDDEN_PROFILES["polyline"]
+    result = recover_profile(target, "polyline", iterations=5, resolution=16, spp=2, learning_rate=0.05)
+    start_error = profile_rms_error(cylinder_like(target), target, "polyline")
+    assert result.errors[-1] < start_error / 1.5
+    assert result.losses[-1] < result.losses[0] / 2.0
     make_profile(result.points)
 
 
 @FULL
 def test_recover_bspline_vase():
-    # Measured: 0.57% of the height (0.52% after 60 steps)
+    # Measured: 0.45% of the height
     result = recover_profile(HIDDEN_PROFILES["bspline"], "bspline", iterations=40, resolution=32, spp=8)
+    print(f"B-spline vase: final profile RMS error {100 * result.errors[-1]:.3f}% of height")
     assert result.errors[-1] < 0.01
 
 
 @FULL
-def test_recover_polyline_glass():
-    # Measured: 1.0-1.4% of the height after 60 steps (README, "Differentiable lathes")
-    result = recover_profile(HIDDEN_PROFILES["polyline"], "polyline", iterations=60, resolution=32, spp=8)
-    assert result.errors[-1] < 0.02
+@pytest.mark.parametrize("seed", [0, 2])
+def test_recover_polyline_glass(seed):
+    # Measured over the seeds 0-6: 0.58-0.74% of the height (README,
+    # "Differentiable lathes")
+    result = recover_profile(HIDDEN_PROFILES["polyline"], "polyline", iterations=60, resolution=32, spp=16,
+                             seed=seed)
+    print(f"polyline glass, seed {seed}: final profile RMS error {100 * result.errors[-1]:.3f}% of height")
+    assert result.errors[-1] < 0.01

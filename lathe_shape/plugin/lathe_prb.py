@@ -67,7 +67,7 @@ from .attached_hits import attach_lathe_hits, differentiable_lathes
 from .lathe_path import NORMAL_CHECKS, with_geometric_frame
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
-from .silhouette import outline_backward, outline_forward
+from .silhouette import outline_backward, outline_forward, outline_samples
 from .variants import register_jit_plugin
 
 __all__ = ["LathePRBIntegrator", "register"]
@@ -171,10 +171,17 @@ class LathePRBIntegrator(RBIntegrator):
 
     def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
         geometry = self.geometry(scene)
+        outline = self.silhouette and bool(geometry.lathes)
+        if outline:
+            # The outline pieces (numpy: it waits for queued kernels) before
+            # the interior pass is queued: that pass's kernel then runs while
+            # the outline term is traced
+            camera = _sensor(scene, sensor)
+            pieces = outline_samples(camera, differentiable_lathes(geometry.lathes))
+            grad_image = np.array(grad_in)
         super().render_backward(scene, params, grad_in, sensor, seed, spp)
-        if self.silhouette and geometry.lathes:
-            outline_backward(self, scene, _sensor(scene, sensor), np.array(grad_in), seed,
-                             self.silhouette_spp)
+        if outline:
+            outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp, pieces)
 
     @dr.syntax
     def sample(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,

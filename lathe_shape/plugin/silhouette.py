@@ -182,11 +182,13 @@ def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
 
 def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
     """Polylines: the arcs of the joint circles between two cones that face
-    the camera differently (one front-, one back-facing)."""
+    the camera differently (one front-, one back-facing). One projection for
+    all arcs."""
     profile = lathe.profile
     _, p1 = profile.segment_points()
     normals = profile.segment_normals()
     m = profile.segment_count
+    arcs = []  # (segment, r, z, lower edges, upper edges) of every arc
     for k in range(m):
         j = (k + 1) % m
         if profile.segments[k, 1] != profile.segments[j, 0] or (j == 0 and not profile.closed_loop):
@@ -197,13 +199,16 @@ def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> 
         for lo, hi in _facing_arcs(r, z, [normals[k], normals[j]], camera):
             count = int(np.clip(np.ceil(_DENSITY * (hi - lo) * r * size), 2, 8192))
             edges = np.linspace(lo, hi, count + 1)
-            phi = 0.5 * (edges[:-1] + edges[1:])
-            ring = np.full(count, r), np.full(count, z)
-            x_lo, x_hi, x_mid = (_project(sensor, _world(lathe, *ring, a))
-                                 for a in (edges[:-1], edges[1:], phi))
-            step = x_hi - x_lo
-            normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
-            out.add(lathe, np.full(count, k), np.ones(count), phi, normal_dl, x_mid)
+            arcs.append((np.full(count, k), np.full(count, r), np.full(count, z), edges[:-1], edges[1:]))
+    if not arcs:
+        return
+    seg, r, z, lo, hi = (np.concatenate(column) for column in zip(*arcs, strict=True))
+    phi = 0.5 * (lo + hi)
+    world = np.concatenate([_world(lathe, r, z, azimuth) for azimuth in (lo, hi, phi)])
+    x_lo, x_hi, x_mid = np.split(_project(sensor, world), 3)
+    step = x_hi - x_lo
+    normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
+    out.add(lathe, seg, np.ones(len(seg)), phi, normal_dl, x_mid)
 
 
 def outline_samples(sensor: mi.Sensor, lathes: list[LatheShape]) -> OutlineSamples:
@@ -236,27 +241,50 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
     return ds.uv, it.p
 
 
-def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray,
-                                normal_dl: np.ndarray, seed: int, spp: int) -> np.ndarray:
-    """``(f(x - eps n) - f(x + eps n)) dl`` (the side the outward normal
-    points away from first), (n, channels): the integrator's primal
-    radiance of camera rays at both sides, averaged over ``spp`` samples."""
+def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray, normal_dl: np.ndarray,
+                   seed: int, spp: int) -> mi.Spectrum:
+    """The integrator's primal radiance (times the sensor weight, not yet
+    evaluated) of camera rays at ``x - eps n`` and ``x + eps n``, ``spp``
+    rounds of both."""
     width, height = sensor.film().crop_size()
-    length = np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
-    offset = _EPSILON * normal_dl / length
-    positions = np.concatenate([x - offset, x + offset])
-    positions = np.tile(positions, (spp, 1))
-    count = len(positions)
+    offset = _EPSILON * normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    positions = np.tile(np.concatenate([x - offset, x + offset]), (spp, 1))
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
-    sampler.seed(dr.opaque(mi.UInt32, seed), count)
+    sampler.seed(dr.opaque(mi.UInt32, seed), len(positions))
     pos = mi.Point2f(*(positions / [width, height]).T.astype(np.float32))
     ray, weight = sensor.sample_ray(0.0, sampler.next_1d(), pos, sampler.next_2d())
     radiance = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
                                  depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
                                  active=mi.Bool(True))[0]
-    values = np.array(weight * radiance).T.reshape(spp, 2, len(x), -1).mean(axis=0)
-    return (values[0] - values[1]) * length
+    return weight * radiance
+
+
+def _difference(radiance: mi.Spectrum, normal_dl: np.ndarray, spp: int) -> np.ndarray:
+    """``(f_in - f_out) dl`` (n, channels) from :func:`_side_radiance`."""
+    length = np.linalg.norm(normal_dl, axis=1, keepdims=True)
+    values = np.array(radiance).T.reshape(spp, 2, len(normal_dl), -1).mean(axis=0)
+    return (values[0] - values[1]) * np.maximum(length, 1e-30)
+
+
+def outline_radiance_difference(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray,
+                                normal_dl: np.ndarray, seed: int, spp: int) -> np.ndarray:
+    """``(f(x - eps n) - f(x + eps n)) dl`` (the side the outward normal
+    points away from first), (n, channels): the integrator's primal
+    radiance of camera rays at both sides, averaged over ``spp`` samples."""
+    return _difference(_side_radiance(scene, sensor, integrator, x, normal_dl, seed, spp), normal_dl, spp)
+
+
+def _hidden(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.Point3f) -> mi.Bool:
+    """Whether something lies between the camera and the (detached) world
+    points (not yet evaluated)."""
+    origin = sensor.world_transform() @ mi.Point3f(0.0)
+    to_point = points - origin
+    distance = dr.norm(to_point)
+    ray = mi.Ray3f(origin, to_point / distance)
+    # A ray to a tangent point may graze the surface just before it
+    ray.maxt = distance * 0.99
+    return integrator.geometry(scene).ray_test(ray, mi.Bool(True))
 
 
 def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.Point3f) -> np.ndarray:
@@ -265,30 +293,32 @@ def outline_visible(integrator, scene: mi.Scene, sensor: mi.Sensor, points: mi.P
     lathe, or behind other shapes) move no visible edge; their difference
     either side would only pick up the shading gradient of what hides
     them."""
-    origin = sensor.world_transform() @ mi.Point3f(0.0)
-    to_point = points - origin
-    distance = dr.norm(to_point)
-    ray = mi.Ray3f(origin, to_point / distance)
-    # A ray to a tangent point may graze the surface just before it
-    ray.maxt = distance * 0.99
-    return ~np.array(integrator.geometry(scene).ray_test(ray, mi.Bool(True)))
+    return ~np.array(_hidden(integrator, scene, sensor, points))
 
 
-def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int):
-    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces,
-    their detached weight ``(f_in - f_out) dl`` (n, channels) and their
-    attached ``n . x``. The radiance either side of all pieces is traced in
-    one wavefront, with a seed of its own (independent of the image's)."""
-    parts = outline_samples(sensor, differentiable_lathes(integrator.geometry(scene).lathes)).merged()
+def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int,
+                   samples: OutlineSamples | None = None):
+    """Per lathe: the pixel ``(row, column, inside)`` of its outline pieces
+    (``samples``, default :func:`outline_samples`), their detached weight
+    ``(f_in - f_out) dl`` (n, channels) and their attached ``n . x``. The
+    radiance either side of all pieces is traced in one wavefront, with a
+    seed of its own (independent of the image's)."""
+    if samples is None:
+        samples = outline_samples(sensor, differentiable_lathes(integrator.geometry(scene).lathes))
+    parts = samples.merged()
     if not parts:
         return
     width, height = sensor.film().crop_size()
     x = np.concatenate([part[5] for part in parts])
     normal_dl = np.concatenate([part[4] for part in parts])
-    weight = outline_radiance_difference(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
     positions = [attached_outline_positions(sensor, *part[:4]) for part in parts]
-    world = np.concatenate([np.array(dr.detach(points)).T for _, points in positions])
-    weight *= outline_visible(integrator, scene, sensor, mi.Point3f(*world.T.astype(np.float32)))[:, None]
+    # The side radiance and the visibility of the outline points
+    # (outline_visible) in one evaluation
+    hidden = [_hidden(integrator, scene, sensor, dr.detach(points)) for _, points in positions]
+    radiance = _side_radiance(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
+    dr.eval(radiance, *hidden)
+    weight = _difference(radiance, normal_dl, spp)
+    weight *= ~np.concatenate([np.array(mask) for mask in hidden])[:, None]
     start = 0
     for (_, seg, _, _, part_normal_dl, part_x), (position, _) in zip(parts, positions, strict=True):
         unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
@@ -317,10 +347,11 @@ def outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
 
 
 def outline_backward(integrator, scene: mi.Scene, sensor: mi.Sensor, grad_in: np.ndarray, seed: int,
-                     spp: int) -> None:
+                     spp: int, samples: OutlineSamples | None = None) -> None:
     """Reverse mode: accumulate the outline part of the gradient of
-    ``sum(grad_in * image)`` into the lathes' ``points``."""
-    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
+    ``sum(grad_in * image)`` into the lathes' ``points`` (outline pieces
+    ``samples``, default :func:`outline_samples`)."""
+    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp, samples):
         if not dr.grad_enabled(speed):
             continue
         channels = min(weight.shape[1], grad_in.shape[2])

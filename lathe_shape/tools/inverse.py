@@ -3,7 +3,8 @@
 The target images are renders of a hidden profile from several views; the
 optimisation starts from a cylinder with as many points, renders the same
 views with ``lathe_prb`` (profile gradients, outline included), and moves
-the points with Adam on the image loss plus a smoothness regulariser. After
+the points with Adam on the image loss plus two regularisers (smoothness,
+and even spacing along the chain), optionally coarse to fine. After
 every step the points are projected back onto valid profiles: the ends of
 an axis-ended chain stay on the axis, radii stay positive, heights stay
 ordered (a z-monotone chain closed along the axis cannot cross itself), and
@@ -25,7 +26,7 @@ from ..profiles import bspline as bs
 from .diff_scenes import lathe_scene
 from .gradients import points_key
 
-__all__ = ["HIDDEN_PROFILES", "InverseResult", "cylinder_like", "plot_convergence", "profile_curve",
+__all__ = ["HIDDEN_PROFILES", "InverseResult", "Stage", "cylinder_like", "plot_convergence", "profile_curve",
            "profile_rms_error", "project_profile", "recover_profile", "render_views", "write_result_images"]
 
 #: The hidden profiles of the examples and tests: a 12-point polyline glass
@@ -38,9 +39,11 @@ HIDDEN_PROFILES = {
                          (0.45, 1.2), (0.0, 1.2)]),
 }
 
-#: Two views: from above at one side, and from below at the other (the
-#: bottom of a vase is seen by no view from above).
-INVERSE_VIEWS = ((10.0, 2.5), (100.0, -0.6))
+#: Two views: from just above the rim at one side (low enough that a top
+#: cap bulging into a cone shows in the outline, high enough to see the cap),
+#: and from below at the other (the bottom of a vase is seen by no view from
+#: above).
+INVERSE_VIEWS = ((10.0, 1.6), (100.0, -0.6))
 
 #: Lights on opposite sides, above and below, so that every part of the
 #: outline is lit.
@@ -132,6 +135,23 @@ def _smoothness(points: mi.Float) -> mi.Float:
     return total
 
 
+def _spacing(points: mi.Float) -> mi.Float:
+    """Sum of squared offsets of the interior points from their neighbours'
+    midpoint, along the neighbours' chord (detached): uneven spacing along
+    the chain, with no pull on its shape (the image loss has no gradient
+    for a point sliding along a straight run)."""
+    n = dr.width(points) // 2
+    index = dr.arange(mi.UInt32, n - 2)
+
+    def point(offset):
+        return mi.Point2f(*(dr.gather(mi.Float, points, 2 * (index + offset) + k) for k in range(2)))
+
+    before, here, after = point(0), point(1), point(2)
+    chord = dr.detach(after - before)
+    along = dr.dot(chord, here - dr.detach(0.5 * (before + after))) / dr.maximum(dr.norm(chord), 1e-6)
+    return dr.sum(dr.square(along))
+
+
 def render_views(scene: mi.Scene, spp: int, seed: int = 0, params=None) -> list[mi.TensorXf]:
     """One render per sensor of ``scene``."""
     return [mi.render(scene, params, sensor=k, spp=spp, seed=seed + 1000 * k, seed_grad=seed + 1000 * k + 1)
@@ -161,55 +181,90 @@ def _write_points(params, key: str, points: np.ndarray) -> bool:
     return True
 
 
+@dataclass(frozen=True)
+class Stage:
+    """One stage of a coarse-to-fine schedule: ``iterations`` Adam steps on
+    renders of ``resolution`` x ``resolution`` pixels, the step size
+    decaying tenfold from ``learning_rate``."""
+
+    resolution: int
+    iterations: int
+    learning_rate: float
+
+
+def _step_points(params, key: str, current: np.ndarray, proposal: np.ndarray) -> np.ndarray:
+    """Move from ``current`` towards ``proposal``, halving the step while
+    the profile validation refuses it; the points written."""
+    step = 1.0
+    while not _write_points(params, key, current + step * (proposal - current)) and step > 1e-3:
+        step *= 0.5
+    return np.array(params[key], dtype=np.float64).reshape(-1, 2)
+
+
+def _image_loss(images, targets) -> mi.Float:
+    """Mean squared pixel difference, summed over the views."""
+    loss = mi.Float(0.0)
+    for image, reference_image in zip(images, targets, strict=True):
+        loss += dr.mean(dr.square(image - reference_image), axis=None)
+    return loss
+
+
 def recover_profile(target: np.ndarray, kind: str = "polyline", iterations: int = 60, resolution: int = 32,
-                    spp: int = 8, learning_rate: float = 0.02, smoothness: float = 1e-4,
-                    views: tuple[tuple[float, float], ...] = INVERSE_VIEWS,
-                    report: Callable[[int, float, float], None] | None = None) -> InverseResult:
+                    spp: int = 8, learning_rate: float = 0.02, smoothness: float = 3e-3,
+                    spacing: float = 3e-3, views: tuple[tuple[float, float], ...] = INVERSE_VIEWS,
+                    report: Callable[[int, float, float], None] | None = None,
+                    stages: tuple[Stage, ...] | None = None, seed: int = 0) -> InverseResult:
     """Recover the axis-ended profile ``target`` ((n, 2) points of ``kind``)
-    from renders of it in ``views``, starting from :func:`cylinder_like`.
-    ``report(iteration, loss, profile_error)`` is called every iteration."""
+    from renders of it in ``views`` (pixel samples of ``seed``), starting
+    from :func:`cylinder_like`. ``stages`` (coarse to fine) replaces the one
+    stage ``(resolution, iterations, learning_rate)``. The weights of the
+    regularisers (:func:`_smoothness`, :func:`_spacing`) decay hundredfold
+    over a stage: they keep the points evenly spread while they travel far,
+    then fade so as not to round the profile's corners. ``report(iteration,
+    loss, profile_error)`` is called every iteration."""
     target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
-    reference = lathe_scene(target, kind, resolution, views, reference="proxy", lights=INVERSE_LIGHTS)
-    # The same seed for the targets and every render of the optimisation:
-    # the pixel samples are then the same, and at the hidden profile the
-    # loss is exactly zero instead of a floor of sampling noise
-    targets = [np.array(image) for image in render_views(reference, spp)]
-    start = cylinder_like(target)
-    scene = lathe_scene(start, kind, resolution, views, reference="proxy", lights=INVERSE_LIGHTS)
+    stages = stages or (Stage(resolution, iterations, learning_rate),)
+    current = cylinder_like(target)
+    result = InverseResult(current)
+    min_radius = 0.02 * float(np.ptp(target[:, 1]))
+    optimizer = mi.ad.Adam(lr=stages[0].learning_rate)
+    optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
     from ..plugin.shape import scene_lathes  # needs a variant
 
-    params = mi.traverse(scene)
-    key = points_key(params, scene_lathes(scene)[0])
-    result = InverseResult(start, targets=targets)
-    result.before = [np.array(image) for image in render_views(scene, spp)]
-    min_radius = 0.02 * float(np.ptp(target[:, 1]))
-    optimizer = mi.ad.Adam(lr=learning_rate)
-    optimizer["points"] = mi.Float(start.ravel().astype(np.float32))
-    current = start
-    for iteration in range(iterations):
-        # Step sizes decay tenfold over the run: large moves first, then
-        # sub-pixel refinement
-        optimizer.set_learning_rate(learning_rate * 0.1 ** (iteration / max(iterations - 1, 1)))
-        params[key] = optimizer["points"]
-        params.update()
-        images = render_views(scene, spp, params=params)
-        loss = smoothness * _smoothness(optimizer["points"])
-        for image, reference_image in zip(images, targets, strict=True):
-            loss += dr.mean(dr.square(image - mi.TensorXf(reference_image)), axis=None)
-        dr.backward(loss)
-        optimizer.step()
-        proposal = project_profile(np.array(optimizer["points"]), min_radius)
-        step = 1.0
-        while not _write_points(params, key, current + step * (proposal - current)) and step > 1e-3:
-            step *= 0.5
-        current = np.array(params[key], dtype=np.float64).reshape(-1, 2)
-        optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
-        result.losses.append(float(np.array(dr.detach(loss)).ravel()[0]))
-        result.errors.append(profile_rms_error(current, target, kind))
-        if report is not None:
-            report(iteration, result.losses[-1], result.errors[-1])
+    for stage in stages:
+        reference = lathe_scene(target, kind, stage.resolution, views, reference="proxy",
+                                lights=INVERSE_LIGHTS)
+        # The same seed for the targets and every render of the optimisation:
+        # the pixel samples are then the same, and at the hidden profile the
+        # loss is exactly zero instead of a floor of sampling noise
+        targets = render_views(reference, spp, seed)
+        scene = lathe_scene(current, kind, stage.resolution, views, reference="proxy", lights=INVERSE_LIGHTS)
+        params = mi.traverse(scene)
+        key = points_key(params, scene_lathes(scene)[0])
+        if not result.before:
+            result.before = [np.array(image) for image in render_views(scene, spp, seed)]
+        for iteration in range(stage.iterations):
+            # Step sizes decay tenfold over the stage: large moves first,
+            # then sub-pixel refinement
+            decay = 0.1 ** (iteration / max(stage.iterations - 1, 1))
+            optimizer.set_learning_rate(stage.learning_rate * decay)
+            params[key] = optimizer["points"]
+            params.update()
+            loss = decay ** 2 * (smoothness * _smoothness(optimizer["points"])
+                                 + spacing * _spacing(optimizer["points"]))
+            loss += _image_loss(render_views(scene, spp, seed, params), targets)
+            dr.backward(loss)
+            optimizer.step()
+            proposal = project_profile(np.array(optimizer["points"]), min_radius)
+            current = _step_points(params, key, current, proposal)
+            optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
+            result.losses.append(float(np.array(dr.detach(loss)).ravel()[0]))
+            result.errors.append(profile_rms_error(current, target, kind))
+            if report is not None:
+                report(len(result.losses) - 1, result.losses[-1], result.errors[-1])
     result.points = current
-    result.after = [np.array(image) for image in render_views(scene, spp)]
+    result.targets = [np.array(image) for image in targets]
+    result.after = [np.array(image) for image in render_views(scene, spp, seed)]
     return result
 
 
