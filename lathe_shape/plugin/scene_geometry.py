@@ -174,7 +174,7 @@ class ExactSceneGeometry:
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
         self.follow_moves()
-        if self.direct is None or not self.lathes:
+        if self.direct is None:  # always so without lathes (see direct_interaction)
             si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
         else:
             pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
@@ -208,7 +208,7 @@ DIRECT_SHAPES = 8
 DIRECT_LATHES = 32
 
 
-def direct_interaction(shapes: list[mi.Shape], lathe_count: int = DIRECT_LATHES) -> bool:
+def direct_interaction(shapes: list[mi.Shape], lathe_count: int) -> bool:
     """Whether :func:`rest_interaction` should serve ``shapes`` in a scene
     of ``lathe_count`` lathes: many lathes (see the module docstring), few
     other shapes, none an instance (whose hits name the instance, not the

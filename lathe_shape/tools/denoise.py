@@ -60,7 +60,7 @@ def box_filter_xml(xml_text: str, source: str = "scene") -> str:
     """The scene text with every film's reconstruction filter set to
     ``box`` (the filter a denoiser expects: independent pixel noise)."""
     try:
-        root = ET.fromstring(blank_comments(xml_text.encode("utf-8")))
+        root = ET.fromstring(blank_comments(xml_text.encode("utf-8")).decode("utf-8"))
     except ET.ParseError as e:
         raise DenoiseError(f"{source}: not a valid XML file ({e})") from None
     for film in root.iter("film"):

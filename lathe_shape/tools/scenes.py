@@ -37,7 +37,7 @@ class SceneSyntaxError(SceneError):
 
 def _parse_xml(xml_text: str, source: str) -> ET.Element:
     try:
-        return ET.fromstring(blank_comments(xml_text.encode("utf-8")))
+        return ET.fromstring(blank_comments(xml_text.encode("utf-8")).decode("utf-8"))
     except ET.ParseError as e:
         raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
 
