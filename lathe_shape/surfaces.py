@@ -7,6 +7,8 @@ needs from one profile kind, without any plugin code (so a native
 * ``tessellate(steps)`` -- the reference mesh (local frame);
 * ``intersect(o, d, tmax, active)`` / ``occluded(...)`` -- the exact kernel
   on local-frame rays, returning ``(t, seg, u, valid)`` hits;
+* ``next_crossing(...)`` -- where ``walks``, the kernel that walks a ray
+  through its crossings from one origin, each found once (no offsets);
 * ``geometry(p, seg, u)`` -- geometric and shading normals, uv, dp_du, dp_dv.
 
 :class:`PolylineSurface` is the paper's Method 1 (cone frustums, annuli,
@@ -41,6 +43,7 @@ from .kernels.common import LatheGeometry, LatheHit
 from .kernels.polyline import (
     PolylineData,
     intersect_polyline,
+    next_crossing_polyline,
     occluded_polyline,
     polyline_geometry,
     profile_polyline_data,
@@ -75,6 +78,16 @@ class Surface(Protocol):
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         """Whether local-frame rays hit the surface at some ``0 < t < tmax``."""
 
+    @property
+    def walks(self) -> bool:
+        """Whether the kind has an offset-free walk (:meth:`next_crossing`)."""
+
+    def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float
+                      ) -> tuple[LatheHit, mi.Float, mi.UInt32]:
+        """The crossing after a previous one of local-frame rays walked from
+        one origin: ``(hit, s, key)``."""
+
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         """Normals, uv and partials at a hit ``(seg, u)`` at local point ``p``."""
 
@@ -103,6 +116,23 @@ class _KernelSurface:
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         return self._occluded(self.data, o, d, tmax, active)
 
+    #: The kind's offset-free walk (``next_crossing_polyline``'s contract),
+    #: ``None`` where the kind has none.
+    _next_crossing = None
+
+    @property
+    def walks(self) -> bool:
+        """Whether :meth:`next_crossing` is available for this kind."""
+        return self._next_crossing is not None
+
+    def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float
+                      ) -> tuple[LatheHit, mi.Float, mi.UInt32]:
+        """The crossing after ``(after_s, after_key)`` (or after ``after_t``
+        where the key is ``NO_CROSSING``) of a ray walked from one origin
+        (see ``next_crossing_polyline``): ``(hit, s, key)``."""
+        return self._next_crossing(self.data, o, d, tmax, active, after_s, after_key, after_t)
+
 
 class PolylineSurface(_KernelSurface):
     """Revolved polyline profile (paper Method 1)."""
@@ -110,6 +140,7 @@ class PolylineSurface(_KernelSurface):
     kind = "polyline"
     _intersect = staticmethod(intersect_polyline)
     _occluded = staticmethod(occluded_polyline)
+    _next_crossing = staticmethod(next_crossing_polyline)
 
     def __init__(self, profile: Profile, smooth: bool = True) -> None:
         self.profile = profile

@@ -3,12 +3,16 @@
 Rays from outside the closed profiles of ``scenes/*.csv`` (a bottle, a
 sundae cup, a wine glass) are followed through every hit the way
 integrators do (``si.spawn_ray`` past each hit: the restart is offset along
-the geometric normal by Mitsuba's ray epsilon), once with the exact kernel
-and once with Mitsuba's own mesh of the same lathe (``--mesh-segments``), on
-the same rays: random ones, rays aimed exactly at profile vertices and rays
-grazing them (see ``lathe_shape.tools.leaks.parity_rays``). A ray that
-starts outside a closed solid must cross it an even number of times; an odd
-count is a leak. Prints the odd counts of both per profile and in total.
+the geometric normal by Mitsuba's ray epsilon), on the same rays for every
+query: random ones, rays aimed exactly at profile vertices and rays grazing
+them (see ``lathe_shape.tools.leaks.parity_rays``). The queries: ``exact``,
+the scene geometry of ``lathe_path``, which carries the walked line from
+hit to hit (``lathe_shape.plugin.line_walk``); ``offset``, the lathe's own
+query on the spawned rays alone; ``mesh``, Mitsuba's own mesh of the same
+lathe (``--mesh-segments``); ``walk``, the kernel walked without offsets. A
+ray that starts outside a closed solid must cross it an even number of
+times; an odd count is a leak. Prints the odd counts of each per profile
+and in total.
 
 ``--random-profiles`` runs the earlier measurement instead: random closed
 profiles, each free stretch of a ray between hits checked by a float64

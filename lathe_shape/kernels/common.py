@@ -58,6 +58,8 @@ __all__ = [
     "LatheGeometry",
     "LatheHit",
     "LatheRay",
+    "NO_CROSSING",
+    "VariantStruct",
     "box_rmin2",
     "bvh_link",
     "bvh_next",
@@ -72,8 +74,12 @@ __all__ = [
 #: Flag bit in a threaded-BVH link word marking a leaf (low bits: its index).
 LEAF = 0x80000000
 
+#: The crossing key of a place along a ray that is no crossing of the lathe
+#: at hand (the kernels' ``next_crossing_*``: continue after a ray parameter).
+NO_CROSSING = 0xFFFFFFFF
 
-class _VariantStruct(type):
+
+class VariantStruct(type):
     """Metaclass: ``DRJIT_STRUCT`` built from ``_FIELDS`` (Mitsuba type
     names) for the variant active at the time of use."""
 
@@ -82,7 +88,7 @@ class _VariantStruct(type):
         return {key: getattr(mi, name) for key, name in cls._FIELDS.items()}
 
 
-class LatheHit(metaclass=_VariantStruct):
+class LatheHit(metaclass=VariantStruct):
     """Nearest hit of a local-frame ray: ``t`` (units of the ray direction,
     inf on a miss), profile segment ``seg``, position ``u`` in [0, 1] along
     the segment (the curve parameter for B-splines), and ``valid``."""
@@ -96,7 +102,7 @@ class LatheHit(metaclass=_VariantStruct):
         self.valid = mi.Bool(False) if valid is None else valid
 
 
-class LatheGeometry(metaclass=_VariantStruct):
+class LatheGeometry(metaclass=VariantStruct):
     """Local differential geometry at a hit: unit outward geometric normal
     ``n``, unit shading normal ``sh_n``, ``uv`` and the partials ``dp_du``,
     ``dp_dv``."""

@@ -70,6 +70,7 @@ import numpy as np
 
 from ..profiles.polyline import Profile
 from .common import (
+    NO_CROSSING,
     LatheData,
     LatheGeometry,
     LatheHit,
@@ -612,13 +613,15 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
 
 def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
                            active: mi.Bool, after_s: mi.Float | None = None,
-                           after_key: mi.UInt32 | None = None
+                           after_key: mi.UInt32 | None = None, after_t: mi.Float | None = None
                            ) -> tuple[PolylineHit, mi.Float, mi.UInt32]:
     """The next crossing of the ray ``o + t d`` (``0 < t < tmax``) after the
     one that a previous call with the same ``o``, ``d`` returned as
     ``(after_s, after_key)`` (``None``: the first crossing, as
     :func:`intersect_polyline`): ``(hit, s, key)``, ``(s, key)`` this
-    crossing's place to pass to the next call.
+    crossing's place to pass to the next call. Lanes whose ``after_key`` is
+    :data:`NO_CROSSING` ask instead for the first crossing with ``t >
+    after_t`` (``None``: 0), e.g. after another shape's hit on the line.
 
     Walking a ray through its crossings this way, from its first origin and
     without offsets, finds each crossing exactly once, also where two of
@@ -627,13 +630,19 @@ def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tm
     outside the lathe then crosses it an even number of times.
     """
     ray = _Ray(data, o, d, tmax, active)
+    s_from = ray.s_lo
+    if after_t is not None:
+        # t = (s_enter + s) t_scale (kernels/common.py, LatheRay)
+        s_from = dr.maximum(s_from, after_t * dr.rcp(ray.t_scale) - ray.s_enter)
     if after_s is not None:
+        keyed = after_key != NO_CROSSING
+        after_s = dr.select(keyed, after_s, s_from)
         later = after_s > ray.s_lo
         ray.after = _Key(dr.select(later, after_s, ray.s_lo),
-                         dr.select(later, after_key, 0xFFFFFFFF))
-        ray.s_lo = ray.after.s  # boxes before it need no visit
+                         dr.select(later & keyed, after_key, NO_CROSSING))
     else:
-        ray.after = _Key(ray.s_lo, mi.UInt32(0xFFFFFFFF))
+        ray.after = _Key(s_from, mi.UInt32(NO_CROSSING))
+    ray.s_lo = ray.after.s  # boxes before it need no visit
     return _first_crossing(data, ray, True)
 
 

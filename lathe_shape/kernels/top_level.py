@@ -44,9 +44,23 @@ import mitsuba as mi
 import numpy as np
 
 from . import bspline, polyline
-from .common import LEAF, LatheData, LatheGeometry, LatheHit, bvh_link, bvh_next, opaque
+from .common import (
+    LEAF,
+    NO_CROSSING,
+    LatheData,
+    LatheGeometry,
+    LatheHit,
+    VariantStruct,
+    bvh_link,
+    bvh_next,
+    opaque,
+)
 
-__all__ = ["KINDS", "KindLayout", "LatheSet", "ProfileTable", "SetHit", "octant_bvh"]
+#: The ``lathe`` of a :class:`CrossingPlace` that is no lathe's crossing.
+NO_LATHE = 0xFFFFFFFF
+
+__all__ = ["KINDS", "NO_LATHE", "CrossingPlace", "KindLayout", "LatheSet", "ProfileTable", "SetHit",
+           "octant_bvh"]
 
 
 # ---------------------------------------------------------------------------
@@ -79,8 +93,11 @@ class KindLayout:
     index in ``links`` is a segment index (polylines), else a leaf of
     ``leaf_buffers`` whose column ``leaf_seg_column`` holds its segment
     (B-splines). ``scalars``: the per-profile opaque scalars.
-    ``intersect``, ``occluded``: the kernels; ``geometry(view, p, seg,
-    local_seg, u, smooth)``: the local differential geometry."""
+    ``intersect``, ``occluded``: the kernels; ``next_crossing``: the
+    kernel that walks a ray through its crossings without offsets
+    (``next_crossing_polyline``'s contract; ``None``: the kind has none);
+    ``geometry(view, p, seg, local_seg, u, smooth)``: the local
+    differential geometry."""
 
     node_floats: int
     seg_buffers: dict
@@ -91,6 +108,7 @@ class KindLayout:
     intersect: Callable
     occluded: Callable
     geometry: Callable
+    next_crossing: Callable | None = None
 
 
 _FRAME = ("n_nodes", "bound_r", "bound_z_lo", "bound_z_hi", "scale", "inv_scale", "z_shift")
@@ -99,7 +117,7 @@ _FRAME = ("n_nodes", "bound_r", "bound_z_lo", "bound_z_hi", "scale", "inv_scale"
 KINDS = {
     "polyline": KindLayout(8, {"seg_geo": 4, "seg_sh": 4, "seg_arc": 2, "seg_side": 8}, {}, True, None,
                            _FRAME + ("tol",), polyline.intersect_polyline, polyline.occluded_polyline,
-                           _polyline_geometry),
+                           _polyline_geometry, polyline.next_crossing_polyline),
     # A B-spline leaf record ends with (t0, h, segment, r_squared): see kernels/bspline.py.
     # The per-profile r_squared_flag lets one kernel serve R and R^2 (sor) profiles.
     "bspline": KindLayout(4, {"seg": bspline._STRIDE}, {"leaf": bspline._LEAF_STRIDE}, False,
@@ -337,6 +355,18 @@ class LatheSet:
         with any lathe of the set."""
         return self._trace(o, d, mi.Float(tmax), mi.Bool(active), False)
 
+    def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after: CrossingPlace) -> tuple[SetHit, CrossingPlace]:
+        """The next crossing of the world rays ``o + t d`` (``0 < t <
+        tmax``) with any lathe of the set after ``after``, the place that a
+        previous call with the same ``o``, ``d`` returned (or a place
+        without lathe: the first crossing after ``after.t``); and this
+        crossing's place. Needs a kind whose layout has ``next_crossing``.
+        Walking a ray this way finds each crossing once (see
+        ``next_crossing_polyline``)."""
+        hit, place = self._trace(o, d, mi.Float(tmax), mi.Bool(active), False, after)
+        return hit, place
+
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         """Whether the world rays hit a lathe of the set at some ``0 < t <
         tmax`` (stops at the first hit found)."""
@@ -360,19 +390,29 @@ class LatheSet:
         cand = entered & is_leaf
         return cand, dr.select(cand, node, bvh_next(node, link, is_leaf, entered))
 
-    def _lathe_hit(self, lathe, o, d, t_max, active, shadow: bool) -> LatheHit:
+    def _lathe_hit(self, lathe, o, d, t_max, active, shadow: bool,
+                   after: CrossingPlace | None) -> tuple[LatheHit, CrossingPlace | None]:
         """The kind's kernel on lathe ``lathe`` (per lane), the ray mapped to
-        its local frame (same ``t``)."""
+        its local frame (same ``t``); walking (``after`` given), also the
+        crossing's place."""
         rows = _rows(self.to_local, lathe, active)
         o_local, d_local = _point(rows, o), _vector(rows, d)
         view = self.table.view(dr.gather(mi.UInt32, self.profile_of, lathe, active), active)
         if shadow:
             found = self.layout.occluded(view, o_local, d_local, t_max, active)
-            return LatheHit(t=mi.Float(0.0), valid=found)
-        return self.layout.intersect(view, o_local, d_local, t_max, active)
+            return LatheHit(t=mi.Float(0.0), valid=found), None
+        if after is None:
+            return self.layout.intersect(view, o_local, d_local, t_max, active), None
+        # The lathe crossed last continues after that crossing, the others
+        # after its t (kernels/polyline.py, next_crossing_polyline)
+        same = after.lathe == lathe
+        hit, s, key = self.layout.next_crossing(
+            view, o_local, d_local, t_max, active, dr.select(same, after.s, 0.0),
+            dr.select(same, after.key, NO_CROSSING), after.t)
+        return hit, CrossingPlace(lathe, s, key, hit.t)
 
     @dr.syntax
-    def _trace(self, o, d, tmax, active, shadow: bool) -> SetHit:
+    def _trace(self, o, d, tmax, active, shadow: bool, after: CrossingPlace | None = None):
         # Slab tests: a zero direction component nudged (no 0 * inf)
         big = dr.maximum(dr.maximum(dr.abs(d.x), dr.abs(d.y)), dr.abs(d.z))
         tiny = big * 1e-20
@@ -382,6 +422,8 @@ class LatheSet:
         end = node + self.n_nodes              # one past the copy's last node
         best = LatheHit(t=mi.Float(tmax))      # nearest hit so far (t: its bound)
         lathe = mi.UInt32(0)                   # its lathe
+        # ... and its crossing's place (walks only)
+        place = None if after is None else dr.zeros(CrossingPlace, dr.width(tmax))
         cand = mi.Bool(False)                  # node is a lathe to intersect
         active = active & (tmax > 0)           # lanes still walking
         while active & (node < end) & ~(best.valid & shadow):
@@ -389,13 +431,15 @@ class LatheSet:
             while active & (node < end) & ~cand:
                 cand, node = self._visit(node, o, inv_d, best.t, active & (node < end))
             index = bvh_link(self.links, node, cand)[2]
-            hit = self._lathe_hit(index, o, d, best.t, cand, shadow)
+            hit, hit_place = self._lathe_hit(index, o, d, best.t, cand, shadow, after)
             take = cand & hit.valid & (hit.t <= best.t)
             best = dr.select(take, hit, best)
             lathe = dr.select(take, index, lathe)
+            if dr.hint(after is not None, mode="scalar"):
+                place = dr.select(take, hit_place, place)
             node = dr.select(cand, node + 1, node)
         best.t = dr.select(best.valid, best.t, dr.inf)
-        return SetHit(best, lathe)
+        return SetHit(best, lathe) if after is None else (SetHit(best, lathe), place)
 
     def geometry(self, hit: SetHit, o: mi.Point3f, d: mi.Vector3f) -> tuple[LatheGeometry, mi.UInt32]:
         """World-space differential geometry at ``hit`` of the world rays
@@ -418,6 +462,21 @@ class LatheSet:
         world = LatheGeometry(n=_normal(to_local, geo.n), sh_n=_normal(to_local, geo.sh_n), uv=geo.uv,
                               dp_du=_vector(to_world, geo.dp_du), dp_dv=_vector(to_world, geo.dp_dv))
         return world, local_seg
+
+
+class CrossingPlace(metaclass=VariantStruct):
+    """Where a walk along a line stands: the last crossing's ``lathe`` (a
+    :class:`LatheSet` index; :data:`NO_LATHE` for none), its place ``(s,
+    key)`` in that lathe's kernel and its ray parameter ``t`` (units of the
+    line's direction). A walk continues after it."""
+
+    _FIELDS = {"lathe": "UInt32", "s": "Float", "key": "UInt32", "t": "Float"}
+
+    def __init__(self, lathe=None, s=None, key=None, t=None) -> None:
+        self.lathe = mi.UInt32(NO_LATHE) if lathe is None else lathe
+        self.s = mi.Float(0.0) if s is None else s
+        self.key = mi.UInt32(NO_CROSSING) if key is None else key
+        self.t = mi.Float(0.0) if t is None else t
 
 
 class SetHit(LatheHit):

@@ -39,6 +39,9 @@
 
 Every ``lathe`` in the scene is intersected exactly by its kernel, merged with
 Mitsuba's hit on the rest of the scene (see :mod:`lathe_shape.plugin.scene_geometry`);
+a ray that passes straight through a lathe's surface goes on along the same
+line from the crossing it took, without an offset, so no crossing is skipped
+or taken twice (:mod:`lathe_shape.plugin.line_walk`);
 all other shapes, BSDFs and emitters are Mitsuba's own. The estimator follows
 Mitsuba's ``path``: emitter sampling and BSDF sampling combined with multiple
 importance sampling (power heuristic), Russian roulette after ``rr_depth``.
@@ -61,6 +64,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .line_walk import start_walk
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -164,6 +168,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         bsdf_ctx = mi.BSDFContext()
 
         ray = mi.Ray3f(ray)                  # Current ray
+        walk = start_walk(dr.width(ray.d))   # Its line and last lathe crossing (line_walk.py)
         depth = mi.UInt32(0)                 # Number of surface interactions so far
         L = mi.Spectrum(0.0)                 # Radiance accumulated along the path
         beta = mi.Spectrum(1.0)              # Path throughput weight
@@ -180,7 +185,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
 
         while dr.hint(active, max_iterations=-1, label="lathe_path"):
-            si = geometry.ray_intersect(ray, active)
+            si, walk = geometry.ray_intersect_walk(ray, active, walk)
             valid = si.is_valid()
             valid_ray |= active & valid & (depth == 0)
 

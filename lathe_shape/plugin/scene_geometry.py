@@ -45,9 +45,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..kernels.common import opaque
-from ..kernels.top_level import KINDS, LatheSet, ProfileTable
+from ..kernels.common import NO_CROSSING, opaque
+from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
 from .interaction import lathe_interaction
+from .line_walk import LineWalk, continues_line
 from .shape import LatheShape, scene_lathes
 
 __all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
@@ -76,6 +77,12 @@ class ExactSceneGeometry:
         self.single = [group[0] for group in by_kind.values() if len(group) == 1]
         #: Kinds of several lathes, each intersected as one set.
         self.groups = [LatheGroup(group) for group in by_kind.values() if len(group) > 1]
+        # Lathe indices of walks (line_walk.py): the single lathes', then
+        # each group's in turn
+        first = len(self.single)
+        for group in self.groups:
+            group.number_from(first)
+            first += len(group.lathes)
         if any(s.class_name() == "Instance" for s in others):
             self._refuse_instanced_lathes(scene)
         #: The non-lathe shapes whose surface interaction is computed by a
@@ -174,11 +181,7 @@ class ExactSceneGeometry:
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
         self.follow_moves()
-        if self.direct is None:  # always so without lathes (see direct_interaction)
-            si = self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
-        else:
-            pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
-            si = rest_interaction(self.direct, ray, pi, active)
+        si = self._rest_intersect(ray, active)
         for lathe in self.single:
             ray_lathe = mi.Ray3f(ray)
             ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
@@ -189,6 +192,56 @@ class ExactSceneGeometry:
             si = dr.select(si_group.t < si.t, si_group, si)
         return si
 
+    def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool,
+                           walk: LineWalk) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
+        """Nearest surface interaction along ``ray``, a ray that may go on
+        along the line of ``walk`` past its last lathe crossing (see
+        :mod:`~lathe_shape.plugin.line_walk`): where it does, the lathes
+        are queried on that line for the crossing after the one taken (no
+        offset, none skipped or found twice); elsewhere as
+        :meth:`ray_intersect`. Returns the interaction (``t`` along
+        ``ray``) and the walk to pass with the next ray."""
+        self.follow_moves()
+        si = self._rest_intersect(ray, active)
+        same = mi.Bool(active) & continues_line(ray, walk)
+        line = mi.Ray3f(ray)
+        line.o = dr.select(same, walk.o, ray.o)
+        line.d = dr.select(same, walk.d, ray.d)
+        t0 = dr.select(same, walk.t, 0.0)  # the line's parameter at ray.o
+        # A walked lathe crossing must come before another shape's hit by
+        # more than the spawn offset of ray.o, as it had to on the offset
+        # ray (Mitsuba's spawn_ray): where a lathe touches a shape (a glass
+        # standing on a floor, bottom and floor coplanar) the shape wins.
+        spawn_offset = (1.0 + dr.max(dr.abs(ray.o))) * mi.math.RayEpsilon * dr.rcp(dr.norm(ray.d))
+        margin = dr.select(same, spawn_offset, 0.0)
+        after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
+        walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
+        for index, lathe in enumerate(self.single):
+            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            if lathe.surface.walks:
+                mine = after.lathe == index
+                si_lathe, s, key = lathe.next_crossing_exact(
+                    line, active, dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING), t0)
+                place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
+            else:
+                ray_lathe = mi.Ray3f(ray)
+                ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
+                si_lathe, place = lathe.ray_intersect_exact(ray_lathe, active), CrossingPlace()
+                si_lathe.t = si_lathe.t + t0  # along the line, as the walking kinds' t
+            si, walk = _nearer(si, walk, si_lathe, place, t0, margin)
+        for group in self.groups:
+            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            si_group, place = group.ray_walk(line, ray, active, after)
+            si, walk = _nearer(si, walk, si_group, place, t0, margin)
+        return si, walk
+
+    def _rest_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
+        """Mitsuba's nearest interaction with the non-lathe shapes."""
+        if self.direct is None:  # always so without lathes (see direct_interaction)
+            return self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
+        return rest_interaction(self.direct, ray, pi, active)
+
     def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
         """Is anything hit along ``ray`` before ``ray.maxt``?"""
         self.follow_moves()
@@ -198,6 +251,24 @@ class ExactSceneGeometry:
         for group in self.groups:
             occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
+
+
+def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
+            place: CrossingPlace, t0: mi.Float, margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
+    """The nearer of ``si`` (``t`` along the ray) and a lathe's hit
+    ``si_lathe`` (``t`` along the walked line, which the ray meets at
+    ``t0``; nearer only by more than ``margin``), and the walk that goes
+    on from it."""
+    t_ray = dr.maximum(si_lathe.t - t0, 0.0)
+    take = si_lathe.is_valid() & (t_ray < si.t - margin)
+    walk = LineWalk(walk.o, walk.d, dr.select(take, place.lathe, walk.lathe),
+                    dr.select(take, place.s, walk.s), dr.select(take, place.key, walk.key),
+                    dr.select(take, place.t, walk.t))
+    # A new interaction: Mitsuba's field accessors return references, so
+    # si_lathe.t must not be assigned (place.t may be that very array).
+    nearer = dr.select(take, si_lathe, si)
+    nearer.t = dr.select(take, t_ray, si.t)
+    return nearer, walk
 
 
 #: Most non-lathe shapes whose surface interactions are computed by direct
@@ -307,7 +378,36 @@ class LatheGroup:
 
     def ray_intersect(self, ray: mi.Ray3f, tmax: mi.Float, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest hit with any of the lathes before ``tmax``."""
-        hit = self.set.intersect(ray.o, ray.d, tmax, active)
+        return self._interaction(ray, self.set.intersect(ray.o, ray.d, tmax, active))
+
+    def number_from(self, first: int) -> None:
+        """Number the lathes ``first, first + 1, ...`` in walks (opaque:
+        the lathe count is no constant of the traced kernels)."""
+        self.first = opaque(np.array([first], dtype=np.uint32), mi.UInt32)
+        self.count = opaque(np.array([len(self.lathes)], dtype=np.uint32), mi.UInt32)
+
+    def ray_walk(self, line: mi.Ray3f, ray: mi.Ray3f, active: mi.Bool,
+                 after: CrossingPlace) -> tuple[mi.SurfaceInteraction3f, CrossingPlace]:
+        """Nearest crossing with any of the lathes along the walked ``line``
+        (before ``line.maxt``) after the place ``after`` (see
+        :meth:`ExactSceneGeometry.ray_intersect_walk`; lathes numbered as
+        :meth:`number_from` says), and its place. A kind without a walk
+        queries ``ray`` (``t`` then shifted to the line's, ``t + after.t``)
+        and reports no place."""
+        if self.set.layout.next_crossing is None:
+            tmax = line.maxt - after.t
+            si = self._interaction(ray, self.set.intersect(ray.o, ray.d, tmax, active))
+            si.t = si.t + after.t
+            return si, CrossingPlace()
+        mine = (after.lathe >= self.first) & (after.lathe - self.first < self.count)
+        lathe = dr.select(mine, after.lathe - self.first, NO_LATHE)
+        local = CrossingPlace(lathe, after.s, after.key, after.t)
+        hit, place = self.set.next_crossing(line.o, line.d, line.maxt, active, local)
+        place.lathe = place.lathe + self.first
+        return self._interaction(line, hit), place
+
+    def _interaction(self, ray: mi.Ray3f, hit: SetHit) -> mi.SurfaceInteraction3f:
+        """The surface interaction of the set's ``hit`` along ``ray``."""
         geo, prim_index = self.set.geometry(hit, ray.o, ray.d)
         flip = dr.gather(mi.UInt32, self.flip, hit.lathe, hit.valid) != 0
         geo.n = dr.select(flip, -geo.n, geo.n)

@@ -345,6 +345,24 @@ class LatheShape(mi.Mesh):
         hit = self.surface.intersect(o, d, mi.Float(ray.maxt), active)
         return self._interaction(ray, o, d, hit)
 
+    def next_crossing_exact(self, line: mi.Ray3f, active: mi.Bool, after_s: mi.Float,
+                            after_key: mi.UInt32, after_t: mi.Float
+                            ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32]:
+        """Walk the world-space ``line`` through its crossings with the exact
+        lathe, without offsets (kinds whose surface ``walks``): the crossing
+        after the one at ``(after_s, after_key)`` that a previous call with
+        the same ``line.o``, ``line.d`` returned, or where ``after_key`` is
+        ``NO_CROSSING`` the first one with ``t > after_t``, before
+        ``line.maxt``. Returns the surface interaction (as
+        :meth:`ray_intersect_exact`, ``t`` along ``line``) and the
+        crossing's place ``(s, key)``."""
+        active = mi.Bool(active)
+        o = self._to_local @ line.o
+        d = self._to_local @ line.d
+        hit, s, key = self.surface.next_crossing(o, d, mi.Float(line.maxt), active, after_s, after_key,
+                                                 after_t)
+        return self._interaction(line, o, d, hit), s, key
+
     def ray_test_exact(self, ray: mi.Ray3f, active: mi.Bool = True) -> mi.Bool:
         """Shadow-ray test: does the world-space ray hit the lathe before
         ``ray.maxt``?"""

@@ -35,6 +35,8 @@ from ..kernels.polyline import (
     next_crossing_polyline,
     polyline_geometry,
 )
+from ..plugin.line_walk import start_walk
+from ..plugin.scene_geometry import ExactSceneGeometry
 from . import reference as ref
 
 __all__ = [
@@ -222,22 +224,28 @@ def parity_rays(start: np.ndarray, end: np.ndarray, rng: np.random.Generator,
 
 
 def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
-               max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+               max_hits: int = 64, walked: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Follow rays through all their hits as an integrator does.
 
     ``intersect(ray, active) -> mi.SurfaceInteraction3f`` is the query under
-    test; after every hit the ray continues as ``si.spawn_ray(d)``. Returns
-    ``(crossings, stuck)`` per ray: the number of hits, and whether the ray
-    still hit something after ``max_hits``."""
+    test; after every hit the ray continues as ``si.spawn_ray(d)``. With
+    ``walked``, ``intersect(ray, active, walk) -> (si, walk)`` carries the
+    :class:`~lathe_shape.plugin.line_walk.LineWalk` from hit to hit, as
+    ``lathe_path`` does. Returns ``(crossings, stuck)`` per ray: the number
+    of hits, and whether the ray still hit something after ``max_hits``."""
     ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
     active = dr.full(mi.Bool, True, len(o))
     count = dr.zeros(mi.UInt32, len(o))
+    walk = start_walk(len(o)) if walked else None
     for _ in range(max_hits):
-        si = intersect(ray, active)
+        if walked:
+            si, walk = intersect(ray, active, walk)
+        else:
+            si = intersect(ray, active)
         active &= si.is_valid()
         count += mi.UInt32(active)
         ray = dr.select(active, si.spawn_ray(ray.d), ray)
-        dr.eval(ray, active, count)
+        dr.eval(ray, active, count, walk)
         if not dr.any(active):
             break
     return count.numpy().astype(np.int64), active.numpy()
@@ -268,24 +276,39 @@ def crossing_walk(data: PolylineData, o: np.ndarray, d: np.ndarray,
 
 
 def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
-                       chunk: int = 250_000, kind: str | None = None) -> dict[str, int]:
+                       chunk: int = 250_000, kind: str | None = None, copies: int = 1) -> dict[str, int]:
     """Spawn-ray parity walk through the lathe of the profile file
     ``filename`` (a closed solid, local frame = world), in chunks of
     ``chunk`` rays (``kind``: the lathe's profile kind, default the file's
-    own): the exact kernel (``ray_intersect_exact``) and Mitsuba's
-    mesh of the lathe (``mesh_segments`` azimuthal steps, the scene's own
-    accelerator) on the same :func:`parity_rays`, both walked with
-    ``si.spawn_ray`` (:func:`spawn_walk`), and the exact kernel walked
-    without offsets (``walk``: :func:`crossing_walk`, polyline profiles
-    only). Every ray starts outside, so an odd number of crossings is a
-    leak. Returns the counts ``rays``, ``hitting_exact``, ``odd_exact``,
-    ``stuck_exact`` and the same for ``mesh`` and ``walk``."""
+    own), on the same :func:`parity_rays` for every query, each walked with
+    ``si.spawn_ray`` past every hit (:func:`spawn_walk`):
+
+    * ``exact``: the scene geometry of ``lathe_path``
+      (``ExactSceneGeometry.ray_intersect_walk``), which carries the walked
+      line from hit to hit;
+    * ``offset``: the lathe's own query (``ray_intersect_exact``) on the
+      spawned rays alone, each restarted off the surface;
+    * ``mesh``: Mitsuba's mesh of the lathe (``mesh_segments`` azimuthal
+      steps, the scene's own accelerator);
+    * ``walk``: the kernel walked without offsets (:func:`crossing_walk`,
+      polyline profiles only).
+
+    ``copies`` > 1 adds that many more copies of the lathe far from the
+    first (the rays aim at the first), so that the scene geometry walks
+    them as one lathe set (kernels/top_level.py). Every ray starts outside,
+    so an odd number of crossings is a leak. Returns the counts ``rays`` and per query ``hitting_<query>``,
+    ``odd_<query>``, ``stuck_<query>``."""
     lathe_props = {"type": "lathe", "filename": filename, "mesh_segments": mesh_segments}
-    scene = mi.load_dict({"type": "scene", "lathe": lathe_props | ({"kind": kind} if kind else {})})
+    lathe_props |= {"kind": kind} if kind else {}
+    far = [{**lathe_props, "mesh_segments": 3, "to_world": mi.ScalarTransform4f().translate([1e4 * k, 0, 0])}
+           for k in range(1, copies)]
+    scene = mi.load_dict({"type": "scene", "lathe": lathe_props} | {f"far_{k}": p for k, p in enumerate(far)})
     lathe = scene.shapes()[0]
-    queries = {"exact": lathe.ray_intersect_exact,
-               "mesh": lambda ray, active: scene.ray_intersect(ray, active=active)}
-    walks = {name: partial(spawn_walk, query) for name, query in queries.items()}
+    walks = {
+        "exact": partial(spawn_walk, ExactSceneGeometry(scene).ray_intersect_walk, walked=True),
+        "offset": partial(spawn_walk, lathe.ray_intersect_exact),
+        "mesh": partial(spawn_walk, lambda ray, active: scene.ray_intersect(ray, active=active)),
+    }
     if isinstance(lathe.surface.data, PolylineData):
         walks["walk"] = partial(crossing_walk, lathe.surface.data)
     if "walk" in walks:
@@ -341,7 +364,7 @@ def parity_summary(name: str, counts: dict[str, int]) -> str:
     the exact kernel and of the mesh (spawn-ray walks) and of the exact
     kernel walked without offsets, per hitting ray."""
     parts = [f"{name:14s} rays {counts['rays']:9d}"]
-    for kind in ("exact", "mesh", "walk"):
+    for kind in ("exact", "offset", "mesh", "walk"):
         if f"hitting_{kind}" not in counts:
             continue
         hits, odd = counts[f"hitting_{kind}"], counts[f"odd_{kind}"]
