@@ -24,6 +24,13 @@ sharing it, and a BVH over the lathes' world boxes), so the traced kernel
 is the same for 2 or 2000 lathes and a ray only visits the lathes whose box
 it enters; a kind with one lathe calls that lathe's own kernel.
 
+A ray that goes on straight past a lathe crossing (the integrator passes
+the :class:`~lathe_shape.plugin.line_walk.LineWalk` of its previous hit to
+:meth:`ExactSceneGeometry.ray_intersect_walk`) queries the lathes on the
+line that crossing was found on, for the crossing after it: no offset, so
+no crossing skipped or taken twice. Mitsuba's shapes are traced along the
+spawned ray as before.
+
 The second scene is built once per set of shapes. A lathe that moves
 (:meth:`LatheShape.set_to_world`) is followed before the next query: its
 kind's transforms and top-level BVH are rebuilt as opaque arrays (no

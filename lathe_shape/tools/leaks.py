@@ -35,8 +35,6 @@ from ..kernels.polyline import (
     next_crossing_polyline,
     polyline_geometry,
 )
-from ..plugin.line_walk import start_walk
-from ..plugin.scene_geometry import ExactSceneGeometry
 from . import reference as ref
 
 __all__ = [
@@ -233,6 +231,8 @@ def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
     :class:`~lathe_shape.plugin.line_walk.LineWalk` from hit to hit, as
     ``lathe_path`` does. Returns ``(crossings, stuck)`` per ray: the number
     of hits, and whether the ray still hit something after ``max_hits``."""
+    from ..plugin.line_walk import start_walk  # needs a variant set
+
     ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
     active = dr.full(mi.Bool, True, len(o))
     count = dr.zeros(mi.UInt32, len(o))
@@ -298,6 +298,8 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
     them as one lathe set (kernels/top_level.py). Every ray starts outside,
     so an odd number of crossings is a leak. Returns the counts ``rays`` and per query ``hitting_<query>``,
     ``odd_<query>``, ``stuck_<query>``."""
+    from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant set
+
     lathe_props = {"type": "lathe", "filename": filename, "mesh_segments": mesh_segments}
     lathe_props |= {"kind": kind} if kind else {}
     far = [{**lathe_props, "mesh_segments": 3, "to_world": mi.ScalarTransform4f().translate([1e4 * k, 0, 0])}
