@@ -103,6 +103,20 @@ def test_help(command):
         assert option in result.stdout
 
 
+def test_every_script_has_help():
+    """Every script in scripts/ answers --help (exit 0): its imports work
+    before it selects a variant. Run side by side (a few seconds)."""
+    scripts = sorted((ROOT / "scripts").glob("*.py"))
+    runs = [(path.name, subprocess.Popen([sys.executable, str(path), "--help"], stdout=subprocess.PIPE,
+                                         stderr=subprocess.PIPE, text=True)) for path in scripts]
+    failed = {}
+    for name, run in runs:
+        _, err = run.communicate(timeout=300)
+        if run.returncode != 0:
+            failed[name] = err.strip().splitlines()[-1:]
+    assert len(runs) >= 15 and not failed, failed
+
+
 def test_default_output_folders(tmp_path, monkeypatch):
     """Without -o, lathe-turntable and lathe-compare write to SCENE_turntable
     and SCENE_compare in the current folder."""
