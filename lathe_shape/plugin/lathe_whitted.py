@@ -75,6 +75,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .lathe_path import NORMAL_CHECKS, with_geometric_frame
+from .line_walk import start_walk
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -314,18 +315,21 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         (``shadows`` = ``filtered``): the product of the delta (or null)
         transmission weights of the surfaces crossed, each taken for light
         arriving from the outside at that angle, in importance mode so that
-        no 1/eta^2 radiance scaling enters; 0 behind any other surface."""
+        no 1/eta^2 radiance scaling enters; 0 behind any other surface. The
+        segment walks its line through the lathes (line_walk.py): no
+        crossing skipped or counted twice."""
         ctx = lobe_context(TRANSMISSION, mi.TransportMode.Importance)
         origin = mi.Interaction3f(si)        # Where the segment starts (last surface crossed)
         transmittance = mi.Spectrum(1.0)     # Product of the crossings' transmittances
         crossings = mi.UInt32(0)             # Surfaces crossed so far
         active = mi.Bool(active)             # Lanes whose segment may hit more surfaces
+        walk = start_walk(dr.width(active))  # Its line and last lathe crossing (line_walk.py)
+        direction = dr.normalize(target - origin.p)  # One line from si to the target
         while dr.hint(active, max_iterations=-1, label="lathe_whitted_shadow"):
-            to_target = target - origin.p
-            distance = dr.norm(to_target)
-            segment = origin.spawn_ray(to_target / distance)
+            distance = dr.dot(target - origin.p, direction)
+            segment = origin.spawn_ray(direction)
             segment.maxt = distance * (1.0 - mi.math.ShadowEpsilon)
-            hit = geometry.ray_intersect(segment, active)
+            hit, walk = geometry.ray_intersect_walk(segment, active, walk)
             active &= hit.is_valid()
             # The transmittance of light arriving from outside at this angle,
             # also where the segment leaves the glass: it is not refracted,
