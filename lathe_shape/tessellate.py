@@ -95,29 +95,26 @@ def revolve(
     u = np.where(pole[:, None], (cols + 0.5)[None, :] / steps, cols[None, :] / steps)
     texcoords = np.stack([u, np.broadcast_to(ring_v[:, None], (k, steps + 1))], axis=-1)
 
-    # Vertex index of ring i at column j.
-    def vid(i: int, j: np.ndarray) -> np.ndarray:
-        return i * (steps + 1) + j
-
-    j = np.arange(steps)
-    faces = []
-    face_band = []
-    for band, (a, b) in enumerate(bands):
-        if not pole[a]:
-            # (A_j, B_j, A_j+1): normal T_profile x T_azimuth = outward.
-            faces.append(np.stack([vid(a, j), vid(b, j), vid(a, j + 1)], axis=1))
-            face_band.append(np.full(steps, band))
-        if not pole[b]:
-            # (A_j+1, B_j, B_j+1); with A a pole, A_j stands for A_j+1.
-            a_next = vid(a, j) if pole[a] else vid(a, j + 1)
-            faces.append(np.stack([a_next, vid(b, j), vid(b, j + 1)], axis=1))
-            face_band.append(np.full(steps, band))
+    # Two triangles per band and column, (m, 2, steps, 3) vertex indices
+    # (vertex index of ring i at column j: i (steps + 1) + j):
+    # (A_j, B_j, A_j+1), normal T_profile x T_azimuth = outward; and
+    # (A_j+1, B_j, B_j+1), where a pole A's A_j stands for A_j+1. A pole
+    # ring's own triangle is left out (it would be degenerate).
+    a = bands[:, 0:1] * (steps + 1)
+    b = bands[:, 1:2] * (steps + 1)
+    j = np.arange(steps)[None, :]
+    a_next = np.where(pole[bands[:, 0]][:, None], a + j, a + j + 1)
+    first = np.stack([a + j, b + j, a + j + 1], axis=-1)
+    second = np.stack([a_next, b + j, b + j + 1], axis=-1)
+    faces = np.stack([first, second], axis=1)
+    keep = np.stack([~pole[bands[:, 0]], ~pole[bands[:, 1]]], axis=1)
+    band_of = np.broadcast_to(np.arange(len(bands))[:, None, None], (len(bands), 2, steps))
     return TriangleMesh(
         positions=positions.reshape(-1, 3),
         normals=normals.reshape(-1, 3),
         texcoords=texcoords.reshape(-1, 2),
-        faces=np.concatenate(faces).astype(np.uint32),
-        face_band=np.concatenate(face_band).astype(np.uint32),
+        faces=faces[keep].reshape(-1, 3).astype(np.uint32),
+        face_band=band_of[keep].reshape(-1).astype(np.uint32),
     )
 
 
@@ -151,26 +148,22 @@ def rings_for_chain(
     v_start: np.ndarray,
     v_end: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Rings (one per distinct (vertex, normal, v)) and bands per segment."""
-    keys: dict[tuple[int, float, float, float], int] = {}
-    ring_points: list[np.ndarray] = []
-    ring_normals: list[np.ndarray] = []
-    ring_v: list[float] = []
-
-    def ring(vertex: int, normal: np.ndarray, v: float) -> int:
-        key = (int(vertex), float(normal[0]), float(normal[1]), float(v))
-        if key not in keys:
-            keys[key] = len(ring_points)
-            ring_points.append(points[vertex])
-            ring_normals.append(normal)
-            ring_v.append(v)
-        return keys[key]
-
-    bands = np.array(
-        [
-            (ring(a, normal_start[s], v_start[s]), ring(b, normal_end[s], v_end[s]))
-            for s, (a, b) in enumerate(segments)
-        ],
-        dtype=np.int64,
-    )
-    return np.array(ring_points), np.array(ring_normals), np.array(ring_v), bands
+    """Rings (one per distinct (vertex, normal, v), numbered in order of
+    first use: each segment's start, then its end) and bands per segment."""
+    m = len(segments)
+    # Keys of the 2m segment ends, interleaved (start of s, end of s); + 0.0
+    # makes -0.0 equal to 0.0 bit for bit (rows are compared as bytes).
+    keys = np.empty((2 * m, 4), dtype=np.float64)
+    keys[0::2, 0], keys[1::2, 0] = segments[:, 0], segments[:, 1]
+    keys[0::2, 1:3], keys[1::2, 1:3] = normal_start, normal_end
+    keys[0::2, 3], keys[1::2, 3] = v_start, v_end
+    keys += 0.0
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    # np.unique numbers the keys in sorted order: renumber by first use
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    ends = first[order]
+    vertex = keys[ends, 0].astype(np.int64)
+    bands = rank[inverse.reshape(-1)].reshape(m, 2).astype(np.int64)
+    return points[vertex], keys[ends, 1:3].copy(), keys[ends, 3].copy(), bands

@@ -159,3 +159,60 @@ def test_any_numbers_give_a_profile_or_a_profile_error(points, close):
     pts = np.array(points + points[:1] if close else points, dtype=float).reshape(-1, 2)
     verdict(polyline, pts)
     verdict(bspline, pts)
+
+
+# -- the CSV reader's fast path -------------------------------------------------
+
+#: Pieces of CSV lines: numbers in several spellings, separators, flags,
+#: comments, headers and a few things that are no number.
+_CSV_TOKENS = st.sampled_from(["1", "-0.5", "2.", ".25", "1e-3", "+3E2", "inf", "NaN", "1_0", "x", "0",
+                               "1", ",", ";", " ", "\t", ", ", " ,", "#c", "# kind: sor", "r", "z",
+                               "sharp", "\u00a0", ",,", "٣"])
+_CSV_LINES = st.lists(st.lists(_CSV_TOKENS, min_size=0, max_size=6).map("".join), min_size=1, max_size=8)
+_COORDINATES = st.floats(-1e3, 1e3, allow_nan=False)
+_SEPARATORS = st.sampled_from([",", ";", " ", ", ", "\t"])
+_WELL_FORMED = st.lists(st.tuples(_COORDINATES, _COORDINATES, st.sampled_from(["", "0", "1"]), _SEPARATORS,
+                                  st.sampled_from(["", "  # note"])), min_size=1, max_size=8)
+
+
+def _read_both(tmp_path, text: str):
+    """The fast reader's and the line-by-line reader's results (or the
+    line-by-line reader's error message) for the file ``text``."""
+    from lathe_shape.profiles import sources
+
+    path = tmp_path / "fuzz.csv"
+    path.write_bytes(text.encode("utf-8"))
+    fast = sources._read_csv_rows(path.read_bytes(), str(path))
+    try:
+        slow = sources._read_csv_lines(str(path))
+    except ProfileError as e:
+        slow = str(e)
+    return fast, slow
+
+
+@FUZZ
+@given(lines=_CSV_LINES, end=st.sampled_from(["\n", "\r\n", "\r"]))
+def test_fast_csv_reader_agrees_with_line_reader(tmp_path_factory, lines, end):
+    """On any text the fast path of read_profile_csv either gives exactly
+    what the line-by-line reader gives (points, sharp flags, line numbers),
+    or steps aside for it (None), never accepting what that refuses."""
+    fast, slow = _read_both(tmp_path_factory.mktemp("csv"), end.join(lines))
+    if fast is None:
+        return
+    assert not isinstance(slow, str), slow
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])
+    np.testing.assert_array_equal(fast[2].numbers, slow[2].numbers)
+
+
+@FUZZ
+@given(rows=_WELL_FORMED, header=st.sampled_from(["", "r,z\n", "R Z SHARP\n", "# comment\n"]))
+def test_fast_csv_reader_reads_well_formed_files(tmp_path_factory, rows, header):
+    """Well-formed files (any separator, flags, comments, a header) are read
+    by the fast path, with the line reader's result."""
+    text = header + "".join(f"{r!r}{sep}{z!r}{sep + flag if flag else ''}{note}\n"
+                            for r, z, flag, sep, note in rows)
+    fast, slow = _read_both(tmp_path_factory.mktemp("csv"), text)
+    assert fast is not None, text
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])

@@ -18,6 +18,7 @@ profile, like a file would be).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import drjit as dr
@@ -25,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..profiles import ProfileError
+from ..profiles.text import PointLabels
 from ..surfaces import BSplineSurface, PolylineSurface, make_surface
 
 __all__ = ["ProfileInput", "ProfileIndex", "profile_index", "rebuild_surface", "remember_input"]
@@ -42,7 +44,7 @@ class ProfileInput:
     #: (n,) bool sharp flags.
     sharp: np.ndarray
     #: Labels of the points for error messages.
-    labels: list[str]
+    labels: Sequence[str]
     #: The file or parameter that gave them.
     source: str
     crease_angle: float
@@ -57,7 +59,8 @@ def remember_input(surface: PolylineSurface | BSplineSurface, points, sharp, lab
     """Attach the user's input to a freshly built surface (``surface.given``)
     so that the ``points`` parameter can expose and rebuild it."""
     surface.given = ProfileInput(surface.kind, np.array(points, dtype=np.float64).reshape(-1, 2),
-                                 np.asarray(sharp, dtype=bool).copy(), list(labels), source,
+                                 np.asarray(sharp, dtype=bool).copy(),
+                                 labels if isinstance(labels, PointLabels) else list(labels), source,
                                  float(crease_angle), bool(smooth), bool(open_sheet))
     return surface
 

@@ -313,7 +313,16 @@ def power_coefficients(seg_ctrl: np.ndarray) -> np.ndarray:
 def evaluate(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
     """Curve point ``(R(t), Z(t))`` of segment(s) ``seg_index`` at ``t``
     (both broadcast; eq. 12)."""
-    c = power_coefficients(seg_ctrl)[np.asarray(seg_index)]
+    return _point_of(power_coefficients(seg_ctrl)[np.asarray(seg_index)], t)
+
+
+def derivative(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent ``(dR/dt, dZ/dt)`` of segment(s) ``seg_index`` at ``t``."""
+    return _tangent_of(power_coefficients(seg_ctrl)[np.asarray(seg_index)], t)
+
+
+def _point_of(c: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`evaluate` from the segments' power coefficients ``c``."""
     t = np.asarray(t, dtype=np.float64)[..., None]
     powers = np.concatenate([np.ones_like(t), t, t * t, t * t * t], axis=-1)
     r = np.sum(c[..., 0, :] * powers, axis=-1)
@@ -321,9 +330,8 @@ def evaluate(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray
     return r, z
 
 
-def derivative(seg_ctrl: np.ndarray, seg_index, t) -> tuple[np.ndarray, np.ndarray]:
-    """Tangent ``(dR/dt, dZ/dt)`` of segment(s) ``seg_index`` at ``t``."""
-    c = power_coefficients(seg_ctrl)[np.asarray(seg_index)]
+def _tangent_of(c: np.ndarray, t) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`derivative` from the segments' power coefficients ``c``."""
     t = np.asarray(t, dtype=np.float64)[..., None]
     powers = np.concatenate([np.zeros_like(t), np.ones_like(t), 2 * t, 3 * t * t], axis=-1)
     return np.sum(c[..., 0, :] * powers, axis=-1), np.sum(c[..., 1, :] * powers, axis=-1)
@@ -436,15 +444,16 @@ def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
 # Sampling
 # ---------------------------------------------------------------------------
 
-def _tangent_dir(seg_ctrl: np.ndarray, i: int, t: float) -> np.ndarray:
-    """Unit tangent; at the zero-speed ends of an open curve the limit
+def _tangent_dir(coeffs: np.ndarray, i: int, t: float, tiny: float) -> np.ndarray:
+    """Unit tangent of segment ``i`` (power coefficients ``coeffs``); at the
+    zero-speed ends of an open curve (speed at most ``tiny``) the limit
     direction (along the segment's chord) is used."""
-    dr, dz = derivative(seg_ctrl, i, t)
+    dr, dz = _tangent_of(coeffs[i], t)
     v = np.array([float(dr), float(dz)])
     n = np.linalg.norm(v)
-    if n <= 1e-9 * _scale(seg_ctrl):
-        r0, z0 = evaluate(seg_ctrl, i, 0.0)
-        r1, z1 = evaluate(seg_ctrl, i, 1.0)
+    if n <= tiny:
+        r0, z0 = _point_of(coeffs[i], 0.0)
+        r1, z1 = _point_of(coeffs[i], 1.0)
         v = np.array([float(r1 - r0), float(z1 - z0)])
         n = np.linalg.norm(v)
     return v / n if n > 0 else v
@@ -465,14 +474,17 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
     curve that end is the start point again).
     """
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
+    # Once for the curve (not per sample: that made sampling quadratic)
+    coeffs = power_coefficients(seg_ctrl)
+    size = _scale(seg_ctrl)
     if max_error is None:
-        max_error = 1e-4 * _scale(seg_ctrl)
+        max_error = 1e-4 * size
 
     def point(i: int, t: float) -> np.ndarray:
-        r, z = evaluate(seg_ctrl, i, t)
+        r, z = _point_of(coeffs[i], t)
         return np.array([float(r), float(z)])
 
-    return adaptive_parameters(len(seg_ctrl), point, lambda i, t: _tangent_dir(seg_ctrl, i, t),
+    return adaptive_parameters(len(seg_ctrl), point, lambda i, t: _tangent_dir(coeffs, i, t, 1e-9 * size),
                                max_angle_deg, max_error, max_depth)
 
 

@@ -25,6 +25,7 @@ open one is the wall alone, a single sheet, outward away from the axis.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,6 +93,11 @@ class SorProfile:
 
     def scale(self) -> float:
         """The curve's size (the diagonal of its (r, z) box, 1 if none)."""
+        return self._size
+
+    @functools.cached_property
+    def _size(self) -> float:
+        # Computed once: derivative() asks for it at every sample
         r_max, z_min, z_max = self.bounds()
         return float(np.hypot(r_max, z_max - z_min)) or 1.0
 

@@ -51,6 +51,9 @@ __all__ = [
     "read_profile_options",
 ]
 
+#: Largest profile CSV file read whole (the fast path of read_profile_csv).
+FAST_READ_BYTES = 64 << 20
+
 #: File name endings read as arc specs; anything else is read as CSV.
 SPEC_SUFFIXES = (".json", ".toml")
 
@@ -84,9 +87,25 @@ def read_profile_csv(path: str | os.PathLike) -> RawPoints:
     """Read a profile CSV file: columns ``r,z[,sharp]``, ``#`` comments,
     optional header, UTF-8 text (a byte order mark is accepted). Returns
     ``(points, sharp, labels)`` like :func:`parse_profile_string`; labels give
-    file name and line number. The file is read line by line, and refused
-    past :data:`~lathe_shape.profiles.limits.MAX_PROFILE_POINTS` points."""
+    file name and line number. Files of up to :data:`FAST_READ_BYTES` are
+    read whole and parsed with one pattern per line; where a line needs a
+    message, and for larger files, the file is read line by line, and
+    refused past :data:`~lathe_shape.profiles.limits.MAX_PROFILE_POINTS`
+    points."""
     path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            small = os.fstat(f.fileno()).st_size <= FAST_READ_BYTES
+            fast = _read_csv_rows(f.read(), path) if small else None
+    except OSError as e:
+        raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
+    # Something to report: read line by line, which names it
+    return fast if fast is not None else _read_csv_lines(path)
+
+
+def _read_csv_lines(path: str) -> RawPoints:
+    """:func:`read_profile_csv` line by line, with a message naming the
+    line for anything that is not a point, a comment or the header."""
     rows = _Rows(path, "line")
     try:
         with open(path, "rb") as f:
@@ -105,6 +124,35 @@ def read_profile_csv(path: str | os.PathLike) -> RawPoints:
     return rows.raw_points()
 
 
+def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
+    """The points of a well-formed profile CSV file (``data``: its bytes),
+    read fast; ``None`` when any line needs a message (not UTF-8, a bad
+    row, too many points), which the line-by-line reader then gives."""
+    try:
+        text = decode_utf8(data, path)
+    except ProfileError:
+        return None
+    coordinates: list[float] = []
+    sharp: list[bool] = []
+    numbers: list[int] = []
+    for number, line in enumerate(_LINE_END.split(text), start=1):
+        match = _ROWS[0].fullmatch(line) or _ROWS[1].fullmatch(line)
+        if match is None:
+            content = line.split("#", 1)[0].strip()
+            fields = [f.strip() for f in content.replace(";", ",").split(",")]
+            if not content or (not numbers and _is_header(fields if len(fields) > 1 else content.split())):
+                continue
+            return None
+        r, z, flag = match.groups()
+        coordinates += (float(r), float(z))
+        sharp.append(flag == "1")
+        numbers.append(number)
+    if len(numbers) > MAX_PROFILE_POINTS:
+        return None
+    points = np.array(coordinates, dtype=np.float64).reshape(-1, 2)
+    return points, np.array(sharp, dtype=bool), PointLabels(path, np.array(numbers, dtype=np.int64), "line")
+
+
 #: ``# key: value`` declarations of a profile CSV (see the module docstring).
 _OPTION = re.compile(r"#\s*(kind|open)\s*:\s*(\S+)\s*$", re.IGNORECASE)
 
@@ -121,6 +169,8 @@ def read_profile_options(path: str | os.PathLike) -> dict:
     try:
         with open(path, "rb") as f:
             for number, raw in _numbered_lines(f):
+                if b"#" not in raw:
+                    continue  # (bytes that are not UTF-8: read_profile_csv names them)
                 line = decode_utf8(raw, path, number).strip()
                 match = _OPTION.match(line) if line.startswith("#") else None
                 if match is None:
@@ -198,14 +248,22 @@ class _Rows:
 
     def add(self, fields: list[str], number: int, wrong_count: str) -> None:
         """One point: ``r z`` or ``r z sharp``, number ``number``."""
-        label = f"{self.prefix}, {self.word} {number}"
         if len(self.numbers) >= MAX_PROFILE_POINTS:
-            check_point_count(len(self.numbers) + 1, label, at_least=True)
+            check_point_count(len(self.numbers) + 1, self.label(number), at_least=True)
         if len(fields) not in (2, 3):
-            raise ProfileError(f"{label}: {wrong_count}")
-        self.coordinates.extend(_parse_float(f, label) for f in fields[:2])
-        self.sharp.append(len(fields) == 3 and _parse_flag(fields[2], label))
+            raise ProfileError(f"{self.label(number)}: {wrong_count}")
+        r, z = fields[0], fields[1]
+        if _NUMBER.fullmatch(r) is None or _NUMBER.fullmatch(z) is None:
+            for text in (r, z):
+                _parse_float(text, self.label(number))
+        self.coordinates.append(float(r))
+        self.coordinates.append(float(z))
+        self.sharp.append(len(fields) == 3 and _parse_flag(fields[2], self.label(number)))
         self.numbers.append(number)
+
+    def label(self, number: int) -> str:
+        """Where point ``number`` is, for messages (built only for one)."""
+        return f"{self.prefix}, {self.word} {number}"
 
     def raw_points(self) -> RawPoints:
         points = np.frombuffer(self.coordinates, dtype=np.float64).reshape(-1, 2).copy()
@@ -223,6 +281,15 @@ def _is_header(fields: list[str]) -> bool:
 #: also takes "1_0", non-ASCII digits and spaces; those are refused here.
 _NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)",
                      re.IGNORECASE)
+
+
+#: A CSV row of two or three columns separated by commas (or semicolons),
+#: or by white space, and an optional comment: the whole content of a line
+#: that :func:`read_profile_csv` accepts without a word.
+_ROWS = [re.compile(rf"\s*({_NUMBER.pattern})\s*{sep}\s*({_NUMBER.pattern})(?:\s*{sep}\s*([01]))?\s*(?:#.*)?",
+                    re.IGNORECASE) for sep in ("[,;]", r"\s")]
+#: Line ends as :func:`_numbered_lines` counts them.
+_LINE_END = re.compile("\r\n|\r|\n")
 
 
 def _parse_float(text: str, label: str) -> float:
