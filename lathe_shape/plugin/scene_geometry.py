@@ -188,16 +188,19 @@ class ExactSceneGeometry:
     def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
         self.follow_moves()
-        si = self._rest_intersect(ray, active)
+        pi, si = self._rest_preliminary(ray, active)
+        won = mi.Bool(False)  # a lathe is nearer than the rest
         for lathe in self.single:
             ray_lathe = mi.Ray3f(ray)
             ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
             si_lathe = lathe.ray_intersect_exact(ray_lathe, active)
-            si = dr.select(si_lathe.t < si.t, si_lathe, si)
+            take = si_lathe.t < si.t
+            si, won = dr.select(take, si_lathe, si), won | take
         for group in self.groups:
             si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
-            si = dr.select(si_group.t < si.t, si_group, si)
-        return si
+            take = si_group.t < si.t
+            si, won = dr.select(take, si_group, si), won | take
+        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won))
 
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool,
                            walk: LineWalk) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
@@ -209,7 +212,7 @@ class ExactSceneGeometry:
         :meth:`ray_intersect`. Returns the interaction (``t`` along
         ``ray``) and the walk to pass with the next ray."""
         self.follow_moves()
-        si = self._rest_intersect(ray, active)
+        pi, si = self._rest_preliminary(ray, active)
         same = mi.Bool(active) & continues_line(ray, walk)
         line = mi.Ray3f(ray)
         line.o = dr.select(same, walk.o, ray.o)
@@ -223,6 +226,7 @@ class ExactSceneGeometry:
         margin = dr.select(same, spawn_offset, 0.0)
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
+        won = mi.Bool(False)  # a lathe is nearer than the rest
         for index, lathe in enumerate(self.single):
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
             if lathe.surface.walks:
@@ -235,18 +239,31 @@ class ExactSceneGeometry:
                 ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
                 si_lathe, place = lathe.ray_intersect_exact(ray_lathe, active), CrossingPlace()
                 si_lathe.t = si_lathe.t + t0  # along the line, as the walking kinds' t
-            si, walk = _nearer(si, walk, si_lathe, place, t0, margin)
+            si, walk, take = _nearer(si, walk, si_lathe, place, t0, margin)
+            won |= take
         for group in self.groups:
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
             si_group, place = group.ray_walk(line, ray, active, after)
-            si, walk = _nearer(si, walk, si_group, place, t0, margin)
-        return si, walk
+            si, walk, take = _nearer(si, walk, si_group, place, t0, margin)
+            won |= take
+        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
 
-    def _rest_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
-        """Mitsuba's nearest interaction with the non-lathe shapes."""
-        if self.direct is None:  # always so without lathes (see direct_interaction)
-            return self.rest.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+    def _rest_preliminary(self, ray: mi.Ray3f,
+                          active: mi.Bool) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
+        """Mitsuba's nearest hit with the non-lathe shapes: the preliminary
+        intersection, and an interaction holding only its ``t`` (inf on a
+        miss) for the lathes to compare with; the full interaction is
+        computed only where no lathe is nearer (:meth:`_rest_interaction`)."""
         pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.t = dr.select(pi.is_valid(), pi.t, dr.inf)
+        return pi, si
+
+    def _rest_interaction(self, ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
+                          active: mi.Bool) -> mi.SurfaceInteraction3f:
+        """The full interaction of the rest's hit ``pi`` (lanes ``active``)."""
+        if self.direct is None:  # always so without lathes (see direct_interaction)
+            return pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
         return rest_interaction(self.direct, ray, pi, active)
 
     def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
@@ -261,11 +278,12 @@ class ExactSceneGeometry:
 
 
 def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
-            place: CrossingPlace, t0: mi.Float, margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
+            place: CrossingPlace, t0: mi.Float,
+            margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
     """The nearer of ``si`` (``t`` along the ray) and a lathe's hit
     ``si_lathe`` (``t`` along the walked line, which the ray meets at
-    ``t0``; nearer only by more than ``margin``), and the walk that goes
-    on from it."""
+    ``t0``; nearer only by more than ``margin``), the walk that goes on
+    from it, and whether the lathe's hit is the nearer."""
     t_ray = dr.maximum(si_lathe.t - t0, 0.0)
     take = si_lathe.is_valid() & (t_ray < si.t - margin)
     walk = LineWalk(walk.o, walk.d, dr.select(take, place.lathe, walk.lathe),
@@ -275,7 +293,7 @@ def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInt
     # si_lathe.t must not be assigned (place.t may be that very array).
     nearer = dr.select(take, si_lathe, si)
     nearer.t = dr.select(take, t_ray, si.t)
-    return nearer, walk
+    return nearer, walk, take
 
 
 #: Most non-lathe shapes whose surface interactions are computed by direct
