@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import threading
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -35,6 +36,7 @@ __all__ = [
     "Denoiser",
     "box_filter_xml",
     "choose_backend",
+    "oidn_filter",
     "prefilter_guides",
 ]
 
@@ -87,24 +89,59 @@ def choose_backend(variant: str, weights: str = OPTIX_WEIGHTS) -> tuple[str, str
     )
 
 
-def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-    """Denoise the albedo and normal guides themselves (OIDN's own filter,
-    as OIDN recommends for guides rendered with few samples).
+#: The OIDN device of :func:`oidn_filter`, made at its first call.
+_OIDN_DEVICE = None
+_OIDN_LOCK = threading.Lock()
 
-    Behind glass the guides are noisy too: each sample of a pixel chooses
-    reflection or refraction at random, so the guides of its first diffuse
-    hit mix different surfaces. Given noisy guides, the denoiser keeps part
-    of the colour noise as if it were detail; prefiltered guides (then
-    declared clean) lower the error of denoised glass pixels (README,
-    Turntables)."""
+
+def oidn_filter(images: dict[str, np.ndarray], **params: object) -> np.ndarray:
+    """Run one OIDN ``RT`` filter on the (H, W, 3) ``images`` given by slot
+    (``color``, ``albedo``, ``normal``) with the filter parameters
+    ``params`` (``hdr``, ``cleanAux``, ...): the output, float32.
+
+    Unlike ``pyoidn.denoise``, the slots are free: an ``albedo`` (or
+    ``normal``) alone selects OIDN's own weights for denoising that guide,
+    the prefiltering OIDN documents for noisy guides."""
     import pyoidn
 
-    albedo = pyoidn.denoise(np.ascontiguousarray(np.clip(albedo, 0.0, 1.0), dtype=np.float32))
+    global _OIDN_DEVICE
+    with _OIDN_LOCK:
+        if _OIDN_DEVICE is None:
+            _OIDN_DEVICE = pyoidn.Device()
+            _OIDN_DEVICE.commit()
+    inputs = {name: np.ascontiguousarray(image, dtype=np.float32) for name, image in images.items()}
+    output = np.zeros_like(next(iter(inputs.values())))
+    # One filter at a time on the shared device (frames are denoised on a
+    # writer thread while the next one renders).
+    with _OIDN_LOCK, pyoidn.Filter(_OIDN_DEVICE, pyoidn.OIDN_FILTER_TYPE_RT) as oidn:
+        for name, image in inputs.items():
+            oidn.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
+        oidn.set_image(pyoidn.OIDN_IMAGE_OUTPUT, output, pyoidn.OIDN_FORMAT_FLOAT3)
+        for name, value in params.items():
+            oidn.set_value(name, value)
+        oidn.commit()
+        oidn.execute()
+    error = _OIDN_DEVICE.get_error()
+    if error is not None:
+        raise DenoiseError(f"Intel Open Image Denoise failed: {error}")
+    return output
+
+
+def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Denoise the albedo and normal guides themselves, each with OIDN's
+    weights for that guide alone (OIDN's recommended prefiltering of guides
+    rendered with few samples; the filtered guides are then declared clean).
+
+    Behind glass the guides are noisy too: with ``lathe_path``'s
+    ``aov_through_delta`` guides each sample of a pixel chooses reflection or
+    refraction at random, and even deterministic guides (``aov_guide_lobe``)
+    alias the background's texture at few samples per pixel. Given noisy
+    guides, the denoiser keeps part of the colour noise as if it were
+    detail; prefiltered guides lower the error of denoised glass pixels."""
+    albedo = oidn_filter({"albedo": np.clip(albedo, 0.0, 1.0)})
     if normal is not None:
-        # Normals in [-1, 1] map to the filter's [0, 1] colour range and back.
-        mapped = np.ascontiguousarray(np.clip(normal, -1.0, 1.0) * 0.5 + 0.5, dtype=np.float32)
-        normal = np.ascontiguousarray(pyoidn.denoise(mapped) * 2.0 - 1.0, dtype=np.float32)
-    return np.ascontiguousarray(albedo, dtype=np.float32), normal
+        normal = oidn_filter({"normal": np.clip(normal, -1.0, 1.0)})
+    return albedo, normal
 
 
 class Denoiser:
@@ -126,13 +163,12 @@ class Denoiser:
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         if self.backend == "optix":
             return self._run_optix(rgb, albedo, normal)
-        import pyoidn
-
         if albedo is None:
             # OIDN takes normals only together with an albedo.
-            return pyoidn.denoise(np.maximum(rgb, 0.0), hdr=True)
+            return oidn_filter({"color": np.maximum(rgb, 0.0)}, hdr=True)
         albedo, normal = prefilter_guides(albedo, normal)
-        return pyoidn.denoise(np.maximum(rgb, 0.0), albedo, normal, hdr=True, clean_aux=True)
+        guides = {"albedo": albedo} if normal is None else {"albedo": albedo, "normal": normal}
+        return oidn_filter({"color": np.maximum(rgb, 0.0), **guides}, hdr=True, cleanAux=True)
 
     def _run_optix(self, rgb: np.ndarray, albedo: np.ndarray | None,
                    normal: np.ndarray | None) -> np.ndarray:
