@@ -150,11 +150,12 @@ def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.
 
     Behind glass the guides are noisy too: with ``lathe_path``'s
     ``aov_through_delta`` guides each sample of a pixel chooses reflection or
-    refraction at random, and even deterministic guides (``aov_guide_lobe``)
-    alias the background's texture at few samples per pixel. Given noisy
-    guides, the denoiser keeps part of the colour noise as if it were
-    detail; prefiltered guides lower the error of denoised glass pixels."""
-    # OIDN's "balanced" quality: as close as "high" here, in half the time.
+    refraction at random, so the guides of its first diffuse hit mix
+    different surfaces. Given noisy guides, the denoiser keeps part of the
+    colour noise as if it were detail; prefiltered guides lower the error of
+    denoised glass pixels, the guide-only filters more than OIDN's colour
+    filter run on a guide (README, Turntables)."""
+    # OIDN's "balanced" quality: as close as "high" on the glass, faster.
     albedo = oidn_filter({"albedo": np.clip(albedo, 0.0, 1.0)}, quality=GUIDE_QUALITY)
     if normal is not None:
         normal = oidn_filter({"normal": np.clip(normal, -1.0, 1.0)}, quality=GUIDE_QUALITY)
