@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import threading
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -32,9 +33,11 @@ __all__ = [
     "BACKENDS",
     "OPTIX_WEIGHTS",
     "DenoiseError",
+    "GUIDE_QUALITY",
     "Denoiser",
     "box_filter_xml",
     "choose_backend",
+    "oidn_filter",
     "prefilter_guides",
 ]
 
@@ -42,6 +45,8 @@ __all__ = [
 BACKENDS = ("oidn", "optix")
 #: Where the NVIDIA driver keeps the OptiX denoiser's weights.
 OPTIX_WEIGHTS = "/usr/share/nvidia/nvoptix.bin"
+#: OIDN's quality setting for prefiltering guides (``OIDN_QUALITY_BALANCED``).
+GUIDE_QUALITY = 5
 
 
 class DenoiseError(RuntimeError):
@@ -87,24 +92,74 @@ def choose_backend(variant: str, weights: str = OPTIX_WEIGHTS) -> tuple[str, str
     )
 
 
-def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-    """Denoise the albedo and normal guides themselves (OIDN's own filter,
-    as OIDN recommends for guides rendered with few samples).
+#: The OIDN device of :func:`oidn_filter`, made at its first call, and its
+#: filters by slots and parameters (set up once: OIDN builds a filter's
+#: network at its first commit; later commits only take the new images).
+_OIDN_DEVICE = None
+_OIDN_FILTERS: dict[tuple, object] = {}
+_OIDN_LOCK = threading.Lock()
 
-    Behind glass the guides are noisy too: each sample of a pixel chooses
-    reflection or refraction at random, so the guides of its first diffuse
-    hit mix different surfaces. Given noisy guides, the denoiser keeps part
-    of the colour noise as if it were detail; prefiltered guides (then
-    declared clean) lower the error of denoised glass pixels (README,
-    Turntables)."""
+
+def _cached_filter(slots: tuple[str, ...], params: dict[str, object]) -> object:
     import pyoidn
 
-    albedo = pyoidn.denoise(np.ascontiguousarray(np.clip(albedo, 0.0, 1.0), dtype=np.float32))
+    global _OIDN_DEVICE
+    if _OIDN_DEVICE is None:
+        _OIDN_DEVICE = pyoidn.Device()
+        _OIDN_DEVICE.commit()
+    key = (slots, tuple(sorted(params.items())))
+    if key not in _OIDN_FILTERS:
+        oidn = pyoidn.Filter(_OIDN_DEVICE, pyoidn.OIDN_FILTER_TYPE_RT)
+        for name, value in params.items():
+            oidn.set_value(name, value)
+        _OIDN_FILTERS[key] = oidn
+    return _OIDN_FILTERS[key]
+
+
+def oidn_filter(images: dict[str, np.ndarray], **params: object) -> np.ndarray:
+    """Run an OIDN ``RT`` filter on the (H, W, 3) ``images`` given by slot
+    (``color``, ``albedo``, ``normal``) with the filter parameters
+    ``params`` (``hdr``, ``cleanAux``, ...): the output, float32.
+
+    Unlike ``pyoidn.denoise``, the slots are free: an ``albedo`` (or
+    ``normal``) alone selects OIDN's own weights for denoising that guide,
+    the prefiltering OIDN documents for noisy guides."""
+    import pyoidn
+
+    inputs = {name: np.ascontiguousarray(image, dtype=np.float32) for name, image in images.items()}
+    output = np.zeros_like(next(iter(inputs.values())))
+    # One filter at a time (frames are denoised on a writer thread while the
+    # next one renders).
+    with _OIDN_LOCK:
+        oidn = _cached_filter(tuple(inputs), params)
+        for name, image in inputs.items():
+            oidn.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
+        oidn.set_image(pyoidn.OIDN_IMAGE_OUTPUT, output, pyoidn.OIDN_FORMAT_FLOAT3)
+        oidn.commit()
+        oidn.execute()
+        error = _OIDN_DEVICE.get_error()
+    if error is not None:
+        raise DenoiseError(f"Intel Open Image Denoise failed: {error}")
+    return output
+
+
+def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Denoise the albedo and normal guides themselves, each with OIDN's
+    weights for that guide alone (OIDN's recommended prefiltering of guides
+    rendered with few samples; the filtered guides are then declared clean).
+
+    Behind glass the guides are noisy too: with ``lathe_path``'s
+    ``aov_through_delta`` guides each sample of a pixel chooses reflection or
+    refraction at random, so the guides of its first diffuse hit mix
+    different surfaces. Given noisy guides, the denoiser keeps part of the
+    colour noise as if it were detail; prefiltered guides lower the error of
+    denoised glass pixels, the guide-only filters more than OIDN's colour
+    filter run on a guide (README, Turntables)."""
+    # OIDN's "balanced" quality: as close as "high" on the glass, faster.
+    albedo = oidn_filter({"albedo": np.clip(albedo, 0.0, 1.0)}, quality=GUIDE_QUALITY)
     if normal is not None:
-        # Normals in [-1, 1] map to the filter's [0, 1] colour range and back.
-        mapped = np.ascontiguousarray(np.clip(normal, -1.0, 1.0) * 0.5 + 0.5, dtype=np.float32)
-        normal = np.ascontiguousarray(pyoidn.denoise(mapped) * 2.0 - 1.0, dtype=np.float32)
-    return np.ascontiguousarray(albedo, dtype=np.float32), normal
+        normal = oidn_filter({"normal": np.clip(normal, -1.0, 1.0)}, quality=GUIDE_QUALITY)
+    return albedo, normal
 
 
 class Denoiser:
@@ -126,13 +181,12 @@ class Denoiser:
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         if self.backend == "optix":
             return self._run_optix(rgb, albedo, normal)
-        import pyoidn
-
         if albedo is None:
             # OIDN takes normals only together with an albedo.
-            return pyoidn.denoise(np.maximum(rgb, 0.0), hdr=True)
+            return oidn_filter({"color": np.maximum(rgb, 0.0)}, hdr=True)
         albedo, normal = prefilter_guides(albedo, normal)
-        return pyoidn.denoise(np.maximum(rgb, 0.0), albedo, normal, hdr=True, clean_aux=True)
+        guides = {"albedo": albedo} if normal is None else {"albedo": albedo, "normal": normal}
+        return oidn_filter({"color": np.maximum(rgb, 0.0), **guides}, hdr=True, cleanAux=True)
 
     def _run_optix(self, rgb: np.ndarray, albedo: np.ndarray | None,
                    normal: np.ndarray | None) -> np.ndarray:

@@ -20,10 +20,12 @@ import mitsuba as mi
 import numpy as np
 
 from .denoise import Denoiser
-from .images import relative_error
+from .images import image_errors, relative_error
 from .turntable import Turntable
 
-__all__ = ["bench_parser", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench"]
+__all__ = [
+    "bench_parser", "compared_frames", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench",
+]
 
 
 def lathe_mask(turntable: Turntable) -> np.ndarray:
@@ -75,26 +77,54 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
     return {"turntable_s": cli_s, "render_s": bare_s, "ratio": cli_s / bare_s}
 
 
-def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
-                   seed: int = 0) -> dict[str, float]:
-    """Relative error on the lathe's pixels against a ``reference_spp``
-    render: ``spp`` frames noisy and denoised (with the integrator's guides,
-    with the albedo guide only, without guides) and a ``high_spp`` frame."""
-    turntable.pose(angle)
-    mask = lathe_mask(turntable)
-    reference = turntable.render(angle, spp=reference_spp, seed=seed + 1)[..., :3]
+def compared_frames(turntable: Turntable, angle: float, spp: int, high_spp: int, reference: np.ndarray,
+                    seed: int = 0) -> dict[str, np.ndarray]:
+    """The (H, W, 3) frames :func:`denoise_errors` compares, by name: an
+    ``spp`` frame noisy and denoised (with the integrator's guides, the
+    albedo guide only, no guides, and the converged guides of the
+    ``reference`` render: what better guides could give at most), a frame
+    of 4 x ``spp`` denoised and a ``high_spp`` frame."""
     image = turntable.render(angle, spp=spp, seed=seed)
     rgb, albedo, normal = image[..., :3], image[..., 3:6], image[..., 6:9]
+    more = turntable.render(angle, spp=4 * spp, seed=seed + 3)
     denoise = Denoiser("oidn")
-    high = turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3]
     return {
-        f"noisy_{spp}spp": relative_error(rgb, reference, mask),
-        f"denoised_{spp}spp": relative_error(denoise(rgb, albedo, normal), reference, mask),
-        f"denoised_{spp}spp_albedo_only": relative_error(denoise(rgb, albedo), reference, mask),
-        f"denoised_{spp}spp_no_guides": relative_error(denoise(rgb), reference, mask),
-        f"noisy_{high_spp}spp": relative_error(high, reference, mask),
-        "glass_pixels": int(mask.sum()),
+        f"noisy_{spp}spp": rgb,
+        f"denoised_{spp}spp": denoise(rgb, albedo, normal),
+        f"denoised_{spp}spp_albedo_only": denoise(rgb, albedo),
+        f"denoised_{spp}spp_no_guides": denoise(rgb),
+        f"noisy_{high_spp}spp": turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3],
+        f"denoised_{spp}spp_reference_guides": denoise(rgb, reference[..., 3:6], reference[..., 6:9]),
+        f"denoised_{4 * spp}spp": denoise(more[..., :3], more[..., 3:6], more[..., 6:9]),
     }
+
+
+def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
+                   seed: int = 0, clean_spp: int = 0) -> dict[str, float]:
+    """Relative error on the lathe's pixels against a ``reference_spp``
+    render of the :func:`compared_frames` (the turntable needs guides), of a
+    second, independent ``reference_spp`` render (the reference's own noise,
+    part of every error) and, with a nonzero ``clean_spp``, of the same
+    frames against a ``clean_spp`` render (names ending ``_vs_<clean_spp>spp``);
+    ``denoised_<spp>spp_brightness``: the denoised frame's mean on the lathe
+    over the reference's, minus one."""
+    turntable.pose(angle)
+    mask = lathe_mask(turntable)
+    reference = turntable.render(angle, spp=reference_spp, seed=seed + 1)
+    frames = compared_frames(turntable, angle, spp, high_spp, reference, seed)
+    second = turntable.render(angle, spp=reference_spp, seed=seed + 4)
+    frames[f"second_reference_{reference_spp}spp"] = second[..., :3]
+    errors: dict[str, float] = {
+        name: relative_error(image, reference[..., :3], mask) for name, image in frames.items()
+    }
+    errors["glass_pixels"] = int(mask.sum())
+    denoised = frames[f"denoised_{spp}spp"]
+    errors[f"denoised_{spp}spp_brightness"] = image_errors(denoised, reference[..., :3], mask)["bias"]
+    if clean_spp:
+        clean = turntable.render(angle, spp=clean_spp, seed=seed + 5)[..., :3]
+        for name, image in frames.items():
+            errors[f"{name}_vs_{clean_spp}spp"] = relative_error(image, clean, mask)
+    return errors
 
 
 def flicker(turntable: Turntable, angles: list[float], spp: int, reference_spp: int,
@@ -142,9 +172,18 @@ def run_bench(argv: list[str] | None = None) -> None:
     folder = os.path.dirname(os.path.abspath(args.scene))
     values = dict(d.split("=", 1) for d in defines)
     turntable = Turntable(load_string_in(folder, text, **values), guides=True)
+    errors = denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp,
+                            clean_spp=args.clean_spp)
+    suffix = f"_vs_{args.clean_spp}spp"
     print("relative error on the glass pixels against", args.reference_spp, "spp (box filter):")
-    for name, value in denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp).items():
-        print(f"  {name}: {value:.4f}" if isinstance(value, float) else f"  {name}: {value}")
+    for name, value in errors.items():
+        if not name.endswith(suffix):
+            print(f"  {name}: {value:.4f}" if isinstance(value, float) else f"  {name}: {value}")
+    if args.clean_spp:
+        print(f"the same against {args.clean_spp} spp (less of the reference's own noise):")
+        for name, value in errors.items():
+            if name.endswith(suffix):
+                print(f"  {name.removesuffix(suffix)}: {value:.4f}")
     world = Turntable(load_string_in(folder, text, **values), "world", guides=True)
     angles = [2.0 * k for k in range(8)]
     for denoise in (False, True):
@@ -163,6 +202,8 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--high-spp", type=int, default=256)
     parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("--clean-spp", type=int, default=4096,
+                        help="a second, cleaner reference for the denoise errors (0: none; default: 4096)")
     parser.add_argument("-D", dest="defines", action="append", default=None, metavar="KEY=VALUE",
                         help="XML defaults (default: integrator=lathe_path, max_depth=8)")
     return parser
