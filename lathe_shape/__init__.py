@@ -59,5 +59,17 @@ __all__ = [
 
 __version__ = "0.1.0"
 
+#: Python's recursion limit while the package is loaded (at least). Mitsuba
+#: loads a scene's shapes in parallel on Dr.Jit's worker threads, and a
+#: ``lathe`` constructor waiting there on an evaluation (its mesh's bounding
+#: box) runs the next queued constructor on the same thread: constructors
+#: nest, a few Python frames each. Under the default limit of 1000 a few
+#: hundred lathes (fewer under a deep caller such as a test runner) ended
+#: in a RecursionError; 1000 lathes need about 4000 (measured: 3000 lathes
+#: load with 20000, the C stack is not the limit).
+RECURSION_LIMIT = 20_000
+if _sys.getrecursionlimit() < RECURSION_LIMIT:
+    _sys.setrecursionlimit(RECURSION_LIMIT)
+
 mi.detail.add_variant_callback(on_variant_change)
 register()

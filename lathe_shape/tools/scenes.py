@@ -189,9 +189,9 @@ def integrator_name(integrator: mi.Integrator) -> str:
 #: Scenes with more lathes than this are loaded sequentially. Mitsuba loads
 #: shapes in parallel, and a thread that waits for Dr.Jit while building one
 #: lathe runs the next lathe's construction inside that wait: with hundreds
-#: of lathes the nesting exceeds Python's recursion limit (measured: 1000
-#: wine glasses fail in parallel, and load in 3.7 s and 430 MB sequentially
-#: with ``reference proxy``).
+#: of lathes the nesting grows deep (the package raises Python's recursion
+#: limit for it, see ``lathe_shape.RECURSION_LIMIT``); sequentially, 1000
+#: wine glasses load in 3.7 s and 430 MB with ``reference proxy``.
 SEQUENTIAL_LOAD_LATHES = 64
 
 
