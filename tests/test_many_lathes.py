@@ -221,3 +221,15 @@ def test_direct_rest_interaction_equals_mitsubas():
     np.testing.assert_array_equal(np.array(got.sh_frame.n), np.array(expected.sh_frame.n))
     np.testing.assert_array_equal(np.array(got.sh_frame.s), np.array(expected.sh_frame.s))
     np.testing.assert_array_equal(got.shape == expected.shape, np.full(n, True))
+
+
+def test_hundreds_of_lathes_load_in_parallel():
+    """Mitsuba's parallel loading nests lathe constructors on its worker
+    threads; with the package's recursion limit 600 of them load (under
+    Python's default limit of 1000 such a scene failed)."""
+    scene = {"type": "scene"}
+    for i in range(600):
+        scene[f"lathe_{i}"] = {"type": "lathe", "profile": "0 0, 1 0, 1 2, 0 2", "mesh_segments": 3,
+                               "reference": "proxy",
+                               "to_world": mi.ScalarTransform4f().translate([3 * i, 0, 0])}
+    assert len(mi.load_dict(scene, parallel=True).shapes()) == 600
