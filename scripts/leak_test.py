@@ -11,8 +11,11 @@ hit to hit (``lathe_shape.plugin.line_walk``); ``offset``, the lathe's own
 query on the spawned rays alone; ``mesh``, Mitsuba's own mesh of the same
 lathe (``--mesh-segments``); ``walk``, the kernel walked without offsets. A
 ray that starts outside a closed solid must cross it an even number of
-times; an odd count is a leak. Prints the odd counts of each per profile
-and in total.
+times; an odd count is a leak. A second line per profile follows rays that
+refract at every hit (index 1.5, restarted with ``si.spawn_ray``), through
+``lathe_path``'s geometry and through the mesh, and counts the rays that
+enter while inside, leave while outside or escape from inside. Prints the
+counts of each per profile and in total.
 
 ``--random-profiles`` runs the earlier measurement instead: random closed
 profiles, each free stretch of a ray between hits checked by a float64
@@ -29,6 +32,8 @@ from pathlib import Path
 from lathe_shape.tools import leaks
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
+#: The refraction walks' counts (see lathe_shape.tools.leaks.refraction_walk).
+REFRACT = ("refract", "refract_mesh")
 
 
 def main() -> None:
@@ -45,11 +50,13 @@ def main() -> None:
     totals: dict[str, int] = {}
     for index, path in enumerate(files):
         counts = leaks.scene_parity_leaks(str(path), args.n_rays // len(files), seed=index,
-                                          mesh_segments=args.mesh_segments, chunk=args.chunk)
+                                          mesh_segments=args.mesh_segments, chunk=args.chunk, refract=True)
         for key, value in counts.items():
             totals[key] = totals.get(key, 0) + value
         print(leaks.parity_summary(path.stem, counts), flush=True)
+        print(leaks.parity_summary(path.stem, counts, REFRACT), flush=True)
     print(leaks.parity_summary("total", totals))
+    print(leaks.parity_summary("total", totals, REFRACT))
 
 
 if __name__ == "__main__":

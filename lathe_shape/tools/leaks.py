@@ -251,6 +251,48 @@ def spawn_walk(intersect: Callable, o: np.ndarray, d: np.ndarray,
     return count.numpy().astype(np.int64), active.numpy()
 
 
+def refraction_walk(intersect: Callable, o: np.ndarray, d: np.ndarray, eta: float = 1.5,
+                    max_hits: int = 24, walked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Follow rays that refract (index ``eta`` inside, total internal
+    reflection where it occurs) at every hit of a closed solid, restarted
+    with ``si.spawn_ray`` as integrators do (``intersect`` and ``walked`` as
+    in :func:`spawn_walk`), keeping track of inside and outside. A ray is
+    inconsistent when it enters
+    while inside, leaves while outside, or escapes from inside (a skipped
+    or doubled crossing); ``stuck`` as in :func:`spawn_walk`. The geometric
+    normal decides, so no shading normal can make a ray turn back. Returns
+    ``(hits, inconsistent, stuck)`` per ray, ``hits`` the number of hits."""
+    from ..plugin.line_walk import start_walk  # needs a variant set
+
+    ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
+    active = dr.full(mi.Bool, True, len(o))
+    inside = dr.full(mi.Bool, False, len(o))
+    wrong = dr.full(mi.Bool, False, len(o))
+    hits = dr.zeros(mi.UInt32, len(o))
+    walk = start_walk(len(o)) if walked else None
+    for _ in range(max_hits):
+        si, walk = intersect(ray, active, walk) if walked else (intersect(ray, active), None)
+        hit = active & si.is_valid()
+        entering = dr.dot(ray.d, si.n) < 0
+        wrong |= (hit & (entering == inside)) | (active & ~hit & inside)
+        hits += mi.UInt32(hit)
+        # Snell's law about the normal facing the ray (eqs. of any textbook)
+        n = dr.select(entering, si.n, -si.n)
+        ratio = dr.select(entering, 1.0 / eta, eta)
+        cos_i = -dr.dot(ray.d, n)
+        k = 1.0 - ratio * ratio * (1.0 - cos_i * cos_i)
+        reflected = k < 0
+        refracted = ratio * ray.d + (ratio * cos_i - dr.sqrt(dr.maximum(k, 0.0))) * n
+        d_next = dr.normalize(dr.select(reflected, ray.d + 2.0 * cos_i * n, refracted))
+        inside = dr.select(hit, entering != reflected, inside)
+        active = hit & ~wrong
+        ray = dr.select(active, si.spawn_ray(d_next), ray)
+        dr.eval(ray, active, inside, wrong, hits, walk)
+        if not dr.any(active):
+            break
+    return hits.numpy().astype(np.int64), wrong.numpy(), active.numpy()
+
+
 def crossing_walk(data: PolylineData, o: np.ndarray, d: np.ndarray,
                   max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Follow rays through all their crossings with a polyline lathe (local
@@ -276,7 +318,8 @@ def crossing_walk(data: PolylineData, o: np.ndarray, d: np.ndarray,
 
 
 def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 512,
-                       chunk: int = 250_000, kind: str | None = None, copies: int = 1) -> dict[str, int]:
+                       chunk: int = 250_000, kind: str | None = None, copies: int = 1,
+                       refract: bool = False) -> dict[str, int]:
     """Spawn-ray parity walk through the lathe of the profile file
     ``filename`` (a closed solid, local frame = world), in chunks of
     ``chunk`` rays (``kind``: the lathe's profile kind, default the file's
@@ -291,7 +334,10 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
     * ``mesh``: Mitsuba's mesh of the lathe (``mesh_segments`` azimuthal
       steps, the scene's own accelerator);
     * ``walk``: the kernel walked without offsets (:func:`crossing_walk`,
-      polyline profiles only).
+      polyline profiles only);
+    * with ``refract``, ``refract`` and ``refract_mesh``: rays refracted at
+      every hit (:func:`refraction_walk`) through the scene geometry and
+      through Mitsuba's mesh; their "odd" count is the inconsistent rays.
 
     ``copies`` > 1 adds that many more copies of the lathe far from the
     first (the rays aim at the first), so that the scene geometry walks
@@ -306,13 +352,16 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
            for k in range(1, copies)]
     scene = mi.load_dict({"type": "scene", "lathe": lathe_props} | {f"far_{k}": p for k, p in enumerate(far)})
     lathe = scene.shapes()[0]
-    walks = {
-        "exact": partial(spawn_walk, ExactSceneGeometry(scene).ray_intersect_walk, walked=True),
-        "offset": partial(spawn_walk, lathe.ray_intersect_exact),
-        "mesh": partial(spawn_walk, lambda ray, active: scene.ray_intersect(ray, active=active)),
-    }
+    exact = ExactSceneGeometry(scene).ray_intersect_walk
+    mesh = lambda ray, active: scene.ray_intersect(ray, active=active)  # noqa: E731
+    walks = {"exact": _odd_counts(partial(spawn_walk, exact, walked=True)),
+             "offset": _odd_counts(partial(spawn_walk, lathe.ray_intersect_exact)),
+             "mesh": _odd_counts(partial(spawn_walk, mesh))}
     if isinstance(lathe.surface.data, PolylineData):
-        walks["walk"] = partial(crossing_walk, lathe.surface.data)
+        walks["walk"] = _odd_counts(partial(crossing_walk, lathe.surface.data))
+    if refract:
+        walks |= {"refract": partial(refraction_walk, exact, walked=True),
+                  "refract_mesh": partial(refraction_walk, mesh)}
     if "walk" in walks:
         start, end = lathe.profile.segment_points()
     else:
@@ -325,11 +374,20 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
         o, d = parity_rays(start, end, rng, min(chunk, n - done))
         counts["rays"] += len(o)
         for name, walk in walks.items():
-            crossings, stuck = walk(o, d)
-            counts[f"hitting_{name}"] += int(np.sum(crossings > 0))
-            counts[f"odd_{name}"] += int(np.sum(crossings % 2 == 1))
+            hits, wrong, stuck = walk(o, d)
+            counts[f"hitting_{name}"] += int(np.sum(hits > 0))
+            counts[f"odd_{name}"] += int(np.sum(wrong))
             counts[f"stuck_{name}"] += int(np.sum(stuck))
     return counts
+
+
+def _odd_counts(walk: Callable) -> Callable:
+    """A walk returning ``(crossings, stuck)`` as one returning ``(hits,
+    odd, stuck)`` (:func:`scene_parity_leaks`)."""
+    def run(o: np.ndarray, d: np.ndarray):
+        crossings, stuck = walk(o, d)
+        return crossings, crossings % 2 == 1, stuck
+    return run
 
 
 def random_profile_leaks(n_rays: int, seed: int = 2024,
@@ -361,12 +419,13 @@ def random_profile_leaks(n_rays: int, seed: int = 2024,
     return rows
 
 
-def parity_summary(name: str, counts: dict[str, int]) -> str:
-    """One line of :func:`scene_parity_leaks` counts: odd (leaking) rays of
-    the exact kernel and of the mesh (spawn-ray walks) and of the exact
-    kernel walked without offsets, per hitting ray."""
+def parity_summary(name: str, counts: dict[str, int],
+                   kinds: tuple[str, ...] = ("exact", "offset", "mesh", "walk")) -> str:
+    """One line of :func:`scene_parity_leaks` counts: the odd (leaking,
+    or for refraction walks inconsistent) rays of each walk of ``kinds``
+    present, per hitting ray."""
     parts = [f"{name:14s} rays {counts['rays']:9d}"]
-    for kind in ("exact", "offset", "mesh", "walk"):
+    for kind in kinds:
         if f"hitting_{kind}" not in counts:
             continue
         hits, odd = counts[f"hitting_{kind}"], counts[f"odd_{kind}"]
