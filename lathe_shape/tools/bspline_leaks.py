@@ -1,0 +1,115 @@
+"""Watertightness of the B-spline kernel walked without offsets.
+
+A ray from outside a closed lathe must cross it an even number of times.
+:func:`crossing_walk_bspline` follows rays through their crossings with
+:func:`~lathe_shape.kernels.bspline.next_crossing_bspline` (the first
+origin kept, each query asking for the crossing after the one just taken),
+and :func:`walk_parity_leaks` counts the odd ones over the rays of
+:func:`lathe_shape.tools.leaks.parity_rays`, aimed at random points, at
+the leaves' joints and next to them, for any cubic-kind lathe data: the
+B-spline test curves (:func:`curve_data`) or a profile file loaded as a
+cubic kind (:func:`profile_file_data`). The same rays are also counted in
+one query (:func:`~lathe_shape.kernels.bspline.count_crossings_bspline`).
+
+Needs an active JIT Mitsuba variant.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..kernels.bspline import (
+    BSplineData,
+    build_bspline_data,
+    count_crossings_bspline,
+    next_crossing_bspline,
+)
+from . import reference as ref
+from .leaks import parity_rays
+
+__all__ = ["leaf_joints", "curve_data", "profile_file_data", "crossing_walk_bspline",
+           "walk_parity_leaks", "walk_summary"]
+
+
+def leaf_joints(data: BSplineData) -> np.ndarray:
+    """The ``(r, z)`` start points of the leaves of ``data`` and the end of
+    the last one (local frame, float64): the joints where two leaves meet."""
+    leaf = np.asarray(data.leaf.numpy(), dtype=np.float64).reshape(-1, 20)
+    size = float(data.scale.numpy()[0])
+    shift = float(data.z_shift.numpy()[0])
+    r = np.append(leaf[:, 0], leaf[-1, 3])
+    if data.r_squared:
+        r = np.sqrt(np.maximum(r, 0.0))
+    z = np.append(leaf[:, 4], leaf[-1, 7])
+    return np.stack([r * size, (z - shift) * size], axis=1)
+
+
+def curve_data(name: str) -> BSplineData:
+    """Kernel data of the B-spline test curve ``name`` (a key of
+    :data:`lathe_shape.tools.reference.BSPLINE_CURVES`)."""
+    return build_bspline_data(ref.bspline_curve(name)[0])
+
+
+def profile_file_data(filename: str, kind: str = "bspline") -> BSplineData:
+    """Kernel data of the profile file ``filename`` read as the cubic kind
+    ``kind`` by the ``lathe`` plugin (local frame = world)."""
+    scene = mi.load_dict({"type": "scene",
+                          "lathe": {"type": "lathe", "filename": filename, "kind": kind}})
+    return scene.shapes()[0].surface.data
+
+
+def crossing_walk_bspline(data: BSplineData, o: np.ndarray, d: np.ndarray,
+                          max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """Follow the rays ``o + t d`` (float64 ``(n, 3)``, rounded to float32)
+    through all their crossings with the lathe of ``data`` without offsets
+    (:func:`~lathe_shape.kernels.bspline.next_crossing_bspline`). Returns
+    ``(crossings, stuck)`` per ray: the number of crossings found, and
+    whether a ray still found one after ``max_hits``."""
+    o32 = mi.Point3f(o.T.astype(np.float32))
+    d32 = mi.Vector3f(d.T.astype(np.float32))
+    tmax = dr.full(mi.Float, dr.inf, len(o))
+    active = dr.full(mi.Bool, True, len(o))
+    count = dr.zeros(mi.UInt32, len(o))
+    after_s, after_key = None, None
+    for _ in range(max_hits):
+        hit, after_s, after_key = next_crossing_bspline(data, o32, d32, tmax, active, after_s, after_key)
+        active &= hit.valid
+        count += mi.UInt32(active)
+        dr.eval(after_s, after_key, active, count)
+        if not dr.any(active):
+            break
+    return count.numpy().astype(np.int64), active.numpy()
+
+
+def walk_parity_leaks(data: BSplineData, n: int, seed: int, chunk: int = 250_000) -> dict[str, int]:
+    """Parity of :func:`crossing_walk_bspline` and of
+    :func:`~lathe_shape.kernels.bspline.count_crossings_bspline` over ``n``
+    rays from outside (:func:`~lathe_shape.tools.leaks.parity_rays` with the
+    leaf joints as vertices), in chunks of ``chunk`` rays. Returns the
+    counts ``rays``, ``hitting`` (walk), ``odd_walk``, ``stuck``,
+    ``odd_count`` and ``disagree`` (rays whose walk and count differ)."""
+    joints = leaf_joints(data)
+    rng = np.random.default_rng(seed)
+    counts = dict.fromkeys(("rays", "hitting", "odd_walk", "stuck", "odd_count", "disagree"), 0)
+    for done in range(0, n, chunk):
+        o, d = parity_rays(joints[:-1], joints[1:], rng, min(chunk, n - done))
+        walked, stuck = crossing_walk_bspline(data, o, d)
+        counted = count_crossings_bspline(data, mi.Point3f(o.T.astype(np.float32)),
+                                          mi.Vector3f(d.T.astype(np.float32)),
+                                          dr.full(mi.Bool, True, len(o))).numpy()
+        counts["rays"] += len(o)
+        counts["hitting"] += int(np.sum(walked > 0))
+        counts["odd_walk"] += int(np.sum(walked % 2 == 1))
+        counts["stuck"] += int(np.sum(stuck))
+        counts["odd_count"] += int(np.sum(counted % 2 == 1))
+        counts["disagree"] += int(np.sum(counted != walked))
+    return counts
+
+
+def walk_summary(name: str, counts: dict[str, int]) -> str:
+    """One line of :func:`walk_parity_leaks` counts."""
+    return (f"{name:18s} rays {counts['rays']:9d} hitting {counts['hitting']:9d} "
+            f"odd walk {counts['odd_walk']:4d} odd count {counts['odd_count']:4d} "
+            f"walk != count {counts['disagree']:4d} stuck {counts['stuck']}")
