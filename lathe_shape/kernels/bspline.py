@@ -689,10 +689,12 @@ def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
         after_s, after_key = ray.after
         take = ok & ((s > after_s) | ((s == after_s) & (key > after_key)))
         take &= (s < best.s) | ((s == best.s) & (key < best.key))
+        key = dr.select(take, key, best.key)
     else:
         take = ok & (s > ray.s_lo) & (s < best.s)
+        key = best.key  # unused: no work on the hot path
     return _Best(dr.select(take, s, best.s), dr.select(take, t, best.u),
-                 dr.select(take, seg, best.seg), dr.select(take, key, best.key), best.count)
+                 dr.select(take, seg, best.seg), key, best.count)
 
 
 class _Leaf:

@@ -7,8 +7,8 @@ origin kept, each query asking for the crossing after the one just taken),
 and :func:`walk_parity_leaks` counts the odd ones over the rays of
 :func:`lathe_shape.tools.leaks.parity_rays`, aimed at random points, at
 the leaves' joints and next to them, for any cubic-kind lathe data: the
-B-spline test curves (:func:`curve_data`) or a profile file loaded as a
-cubic kind (:func:`profile_file_data`). The same rays are also counted in
+B-spline test curves (:func:`curve_data`) or the points of a profile file
+taken as B-spline control points (:func:`profile_file_data`). The same rays are also counted in
 one query (:func:`~lathe_shape.kernels.bspline.count_crossings_bspline`).
 
 Needs an active JIT Mitsuba variant.
@@ -26,6 +26,8 @@ from ..kernels.bspline import (
     count_crossings_bspline,
     next_crossing_bspline,
 )
+from ..profiles.bspline import make_bspline_profile
+from ..profiles.sources import read_points
 from . import reference as ref
 from .leaks import parity_rays
 
@@ -52,12 +54,12 @@ def curve_data(name: str) -> BSplineData:
     return build_bspline_data(ref.bspline_curve(name)[0])
 
 
-def profile_file_data(filename: str, kind: str = "bspline") -> BSplineData:
-    """Kernel data of the profile file ``filename`` read as the cubic kind
-    ``kind`` by the ``lathe`` plugin (local frame = world)."""
-    scene = mi.load_dict({"type": "scene",
-                          "lathe": {"type": "lathe", "filename": filename, "kind": kind}})
-    return scene.shapes()[0].surface.data
+def profile_file_data(filename: str) -> BSplineData:
+    """Kernel data of the points of the profile file ``filename`` read as
+    the control points of a cubic B-spline (sharp flags ignored: a spline
+    has none)."""
+    points = read_points(filename)[0]
+    return build_bspline_data(make_bspline_profile(points, filename).segment_controls)
 
 
 def crossing_walk_bspline(data: BSplineData, o: np.ndarray, d: np.ndarray,
