@@ -42,10 +42,37 @@ of ``R`` and ``Z`` and is handled exactly like a B-spline.
 
 Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
 then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
-covers ``t = t0 + h u``, ``u`` in [0, 1], padded by ``_T_PAD`` in ``t`` on
-both sides (hits on a joint are found by both neighbours), and stores its
-cubics in that local parameter, both in power form and as Bernstein (Bezier)
-control points, plus an exact, padded annular bounding box.
+covers ``t = t0 + h u``, ``u`` in [0, 1] (no overlap with its neighbours),
+and stores its cubics in that local parameter, both in power form and as
+Bernstein (Bezier) control points, plus an exact, padded annular bounding
+box. Its first and last control points are its joints: one float32 point per
+joint, stored bit for bit alike in the two leaves that meet there (also
+where segments meet, and where a closed curve closes).
+
+Joints: parity first. A ray aimed at a joint may, after float32 rounding,
+find a root on both leaves or on neither. Each leaf therefore first fixes
+the parity of its crossings from the signs of ``F`` at its two joints (the
+end values of its Bernstein form, computed from the shared points by the
+same operations in both leaves; a point with ``R < r0`` counts as positive
+whatever float32 says, since ``F`` is positive there): odd exactly when they
+differ. ``F`` changes sign, strictly (0 counts as positive), on an odd
+number of the leaf's monotonic intervals exactly then, and each such
+interval reports one crossing; a tangent root reports two (see
+:func:`_take_interval`). So the parities of all leaves add up to an even
+number of crossings for every line through a closed profile: a ray that
+enters leaves. The roots only say where those crossings are.
+
+Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
+``spawn_ray`` offsets the origin) makes a new line and can skip a second
+crossing closer than the offset. :func:`next_crossing_bspline` instead keeps
+the ray's origin and asks for the crossing after the one just taken,
+ordered by ray parameter, then by a key (leaf and root): each crossing of
+the line is found exactly once. Its traversal culls boxes by the interval
+of ``s`` over which the ray is within them (:func:`_box_span`, monotonic in
+the box, so a parent's interval holds its children's) and keeps every
+crossing within its leaf's interval, so no crossing between the last one
+and the best one so far is culled. :func:`count_crossings_bspline` counts
+them all in one traversal.
 
 Culling (the skeleton shared with the polyline kernel, kernels/common.py):
 a bounding volume hierarchy over the leaves' annular boxes in the
@@ -150,7 +177,8 @@ _LEAF_STRIDE = 20
 #: Longest leaf, in segment parameter t (before padding).
 _LEAF_T = 0.25
 
-#: Parameter overlap: leaves extend _T_PAD beyond their piece in t.
+#: How far, in segment parameter t, the polish may move a hit past the
+#: segment's ends.
 _T_PAD = 1e-3
 
 #: Newton/bisection steps for critical points and for the roots of F.

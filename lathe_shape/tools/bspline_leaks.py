@@ -32,7 +32,7 @@ from . import reference as ref
 from .leaks import parity_rays
 
 __all__ = ["leaf_joints", "curve_data", "profile_file_data", "crossing_walk_bspline",
-           "walk_parity_leaks", "walk_summary"]
+           "walk_parity_leaks", "walk_leak_table", "walk_summary"]
 
 
 def leaf_joints(data: BSplineData) -> np.ndarray:
@@ -110,8 +110,24 @@ def walk_parity_leaks(data: BSplineData, n: int, seed: int, chunk: int = 250_000
     return counts
 
 
+def walk_leak_table(files: list[str], n_rays: int, seed: int = 3,
+                    chunk: int = 250_000) -> list[tuple[str, dict[str, int]]]:
+    """:func:`walk_parity_leaks` over ``n_rays`` rays in all, shared among
+    the B-spline test curves and the profile files ``files`` (as B-spline
+    control points, :func:`profile_file_data`). Returns ``(name, counts)``
+    per profile and a last row ``("total", counts)``."""
+    names = [*ref.BSPLINE_CURVES, *files]
+    rows, total = [], {}
+    for k, name in enumerate(names):
+        data = curve_data(name) if name in ref.BSPLINE_CURVES else profile_file_data(name)
+        counts = walk_parity_leaks(data, n_rays // len(names), seed + k, chunk)
+        rows.append((name, counts))
+        total = {key: total.get(key, 0) + value for key, value in counts.items()}
+    return rows + [("total", total)]
+
+
 def walk_summary(name: str, counts: dict[str, int]) -> str:
     """One line of :func:`walk_parity_leaks` counts."""
-    return (f"{name:18s} rays {counts['rays']:9d} hitting {counts['hitting']:9d} "
+    return (f"{name:28s} rays {counts['rays']:9d} hitting {counts['hitting']:9d} "
             f"odd walk {counts['odd_walk']:4d} odd count {counts['odd_count']:4d} "
             f"walk != count {counts['disagree']:4d} stuck {counts['stuck']}")
