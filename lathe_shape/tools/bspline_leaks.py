@@ -66,23 +66,29 @@ def crossing_walk_bspline(data: BSplineData, o: np.ndarray, d: np.ndarray,
                           max_hits: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """Follow the rays ``o + t d`` (float64 ``(n, 3)``, rounded to float32)
     through all their crossings with the lathe of ``data`` without offsets
-    (:func:`~lathe_shape.kernels.bspline.next_crossing_bspline`). Returns
-    ``(crossings, stuck)`` per ray: the number of crossings found, and
-    whether a ray still found one after ``max_hits``."""
-    o32 = mi.Point3f(o.T.astype(np.float32))
-    d32 = mi.Vector3f(d.T.astype(np.float32))
-    tmax = dr.full(mi.Float, dr.inf, len(o))
-    active = dr.full(mi.Bool, True, len(o))
-    count = dr.zeros(mi.UInt32, len(o))
-    after_s, after_key = None, None
-    for _ in range(max_hits):
-        hit, after_s, after_key = next_crossing_bspline(data, o32, d32, tmax, active, after_s, after_key)
-        active &= hit.valid
-        count += mi.UInt32(active)
-        dr.eval(after_s, after_key, active, count)
-        if not dr.any(active):
-            break
+    (:func:`~lathe_shape.kernels.bspline.next_crossing_bspline`, in one
+    symbolic loop, as an integrator would). Returns ``(crossings, stuck)``
+    per ray: the number of crossings found, and whether a ray still found
+    one after ``max_hits``."""
+    count, active = _walk(data, mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)),
+                          max_hits)
     return count.numpy().astype(np.int64), active.numpy()
+
+
+@dr.syntax
+def _walk(data: BSplineData, o: mi.Point3f, d: mi.Vector3f, max_hits: int):
+    """The symbolic loop of :func:`crossing_walk_bspline`."""
+    count = dr.zeros(mi.UInt32, dr.width(o))     # crossings found so far
+    active = dr.full(mi.Bool, True, dr.width(o))  # the ray may find more
+    s = dr.full(mi.Float, -dr.inf, dr.width(o))  # the last crossing's place ...
+    key = dr.full(mi.UInt32, 0xFFFFFFFF, dr.width(o))  # ... and key (none yet)
+    while active & (count < max_hits):
+        hit, s_next, key_next = next_crossing_bspline(data, o, d, mi.Float(dr.inf), active, s, key)
+        active &= hit.valid
+        count = dr.select(active, count + 1, count)
+        s = dr.select(active, s_next, s)
+        key = dr.select(active, key_next, key)
+    return count, active
 
 
 def walk_parity_leaks(data: BSplineData, n: int, seed: int, chunk: int = 250_000) -> dict[str, int]:
