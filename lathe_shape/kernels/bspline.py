@@ -67,12 +67,10 @@ Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
 crossing closer than the offset. :func:`next_crossing_bspline` instead keeps
 the ray's origin and asks for the crossing after the one just taken,
 ordered by ray parameter, then by a key (leaf and root): each crossing of
-the line is found exactly once. Its traversal culls boxes by the interval
-of ``s`` over which the ray is within them (:func:`_box_span`, monotonic in
-the box, so a parent's interval holds its children's) and keeps every
-crossing within its leaf's interval, so no crossing between the last one
-and the best one so far is culled. :func:`count_crossings_bspline` counts
-them all in one traversal.
+the line is found exactly once. Its traversal culls boxes between the last
+crossing and the best one so far, and keeps every crossing within its
+leaf's box (:func:`_into_box`), so that no crossing in between is culled.
+:func:`count_crossings_bspline` counts them all in one traversal.
 
 Culling (the skeleton shared with the polyline kernel, kernels/common.py):
 a bounding volume hierarchy over the leaves' annular boxes in the
@@ -598,20 +596,27 @@ def _box_enter(ray: _Ray, box, best, active):
     return active & (lo <= hi) & inner & ray.reaches(lo, hi, box.y)
 
 
-def _box_span(ray: _Ray, box):
-    """``(lo, hi)``: the interval of ``s`` where the ray is within the z slab
-    of the annular box ``(rmax, rmin^2, zmin, zmax)`` and ``r(s) <= rmax``
-    (empty: ``lo > hi``). Every operation is monotonic in the box's
-    bounds, so the span of a box holds the span of every box inside it, bit
-    for bit: the keyed walk (:func:`_offer`) culls by spans and keeps each
-    crossing within its leaf's span, so that no culling skips a crossing."""
+def _into_box(ray: _Ray, box, s):
+    """``s`` moved (where needed) to the nearest point at which the ray is
+    within the annular box ``(rmax, rmin^2, zmin, zmax)`` as
+    :func:`_box_enter` computes it: in the box's z slab, with ``r(s)^2 =
+    a (s - s*)^2 + r0^2`` between ``rmin^2`` and ``rmax^2``. :func:`_box_enter`
+    is monotonic in the box and in its interval of ``s``, so a leaf's
+    crossing moved into its box is never culled, by its own box or by an
+    inner node's, while it lies between the walk's last crossing and the
+    best one so far (the keyed walk, :func:`_offer`). A crossing that the
+    root finder places outside its leaf's box (an ill-conditioned root)
+    moves by little."""
     zl = (box.z - ray.o.z) * ray.inv_dz
     zh = (box.w - ray.o.z) * ray.inv_dz
-    rmax2 = box.x * box.x
-    h = dr.sqrt(dr.maximum(rmax2 - ray.r0sq, 0.0) * ray.inv_a)
-    lo = dr.maximum(dr.minimum(zl, zh), ray.s_star - h)
-    hi = dr.minimum(dr.maximum(zl, zh), ray.s_star + h)
-    return lo, dr.select(rmax2 < ray.r0sq, -dr.inf, hi)
+    s = dr.clip(s, dr.minimum(zl, zh), dr.maximum(zl, zh))
+    e = s - ray.s_star
+    r2 = dr.fma(ray.a, e * e, ray.r0sq)
+    # Nearest radius within [rmin, rmax], a few ulps inside
+    r2_in = dr.clip(r2, box.y * (1.0 + 4.0 * dr.epsilon(mi.Float)),
+                    box.x * box.x * (1.0 - 4.0 * dr.epsilon(mi.Float)))
+    e_in = dr.copysign(dr.sqrt(dr.maximum(r2_in - ray.r0sq, 0.0) * ray.inv_a), e)
+    return dr.select(r2 == r2_in, s, ray.s_star + e_in)
 
 
 def _bezier_square(p: list) -> list:
@@ -670,11 +675,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
     Bernstein hull)."""
     box = dr.gather(mi.Vector4f, data.nodes, node, active)
     link, is_leaf, leaf = common.bvh_link(data.links, node, active)
-    if ray.mode == "keyed":
-        lo, hi = _box_span(ray, box)
-        enter = active & (dr.maximum(lo, ray.after[0]) <= dr.minimum(hi, best))
-    else:
-        enter = _box_enter(ray, box, best, active)
+    enter = _box_enter(ray, box, best, active)
     cand = enter & is_leaf
     # Pre-order: descend into an entered inner node, else take its miss
     # link; stay on a candidate (it is solved next).
@@ -740,8 +741,8 @@ class _Leaf:
         self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
         self.key = leaf * _KEYS_PER_LEAF
         if ray.mode == "keyed":
-            # Crossings stay within the leaf's span (_box_span)
-            self.span = _box_span(ray, dr.gather(mi.Vector4f, data.nodes, node, m))
+            # Crossings stay within the leaf's box (_into_box)
+            self.box = dr.gather(mi.Vector4f, data.nodes, node, m)
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
         self.squared = _squared(data)  # R holds R^2 (eq. 20)
@@ -850,7 +851,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     first = dr.select(steep, s_z, dr.select(take1, s1, s2))
     second = dr.select(steep, s_z, dr.select(both, s2, first))
     if ray.mode == "keyed":
-        first, second = dr.clip(first, *lf.span), dr.clip(second, *lf.span)
+        first, second = _into_box(ray, lf.box, first), _into_box(ray, lf.box, second)
     t = dr.fma(lf.h, u, lf.t0)
     best = _offer(best, ray, first, t, lf.seg, lf.key + 2 * slot, m & (found | touching))
     return _offer(best, ray, second, t, lf.seg, lf.key + (2 * slot + 1), touching)
