@@ -922,8 +922,9 @@ def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
 @dr.syntax
 def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
     """The crossings of ``ray`` in its mode (:func:`_offer`): ``(hit,
-    best)``, ``hit`` the first one (polished unless ``shadow``: then the
-    walk ends at the first crossing found)."""
+    best)``, ``hit`` the first one, polished unless ``shadow``; a shadow
+    ray's walk ends at the first crossing found (a counting ray never takes
+    one: it walks on, unpolished)."""
     active = ray.active
     node = mi.UInt32(ray.first) # current node of this ray's BVH copy
     end = ray.end               # one past this copy's last node
@@ -1008,7 +1009,7 @@ def count_crossings_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f,
     the axis to the axis, or a closed loop) the number is even for every
     line (the parity rule of :func:`_take_interval`)."""
     ray = _Ray(data, o, d, dr.full(mi.Float, dr.inf, dr.width(o)), active, "count")
-    return _trace(data, ray, True)[1].count
+    return _trace(data, ray, shadow=True)[1].count
 
 
 def next_crossing_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
