@@ -600,23 +600,29 @@ def _into_box(ray: _Ray, box, s):
     """``s`` moved (where needed) to the nearest point at which the ray is
     within the annular box ``(rmax, rmin^2, zmin, zmax)`` as
     :func:`_box_enter` computes it: in the box's z slab, with ``r(s)^2 =
-    a (s - s*)^2 + r0^2`` between ``rmin^2`` and ``rmax^2``. :func:`_box_enter`
-    is monotonic in the box and in its interval of ``s``, so a leaf's
-    crossing moved into its box is never culled, by its own box or by an
-    inner node's, while it lies between the walk's last crossing and the
-    best one so far (the keyed walk, :func:`_offer`). A crossing that the
-    root finder places outside its leaf's box (an ill-conditioned root)
-    moves by little."""
+    a (s - s*)^2 + r0^2`` between ``rmin^2`` and ``rmax^2`` (a few ulps
+    inside), on either side of ``s*``. :func:`_box_enter` is monotonic in
+    the box and in its interval of ``s``, so a leaf's crossing moved into
+    its box is never culled, by its own box or by an inner node's, while it
+    lies between the walk's last crossing and the best one so far (the
+    keyed walk, :func:`_offer`). Only a crossing that the root finder
+    places outside its leaf's box (an ill-conditioned root) moves."""
     zl = (box.z - ray.o.z) * ray.inv_dz
     zh = (box.w - ray.o.z) * ray.inv_dz
-    s = dr.clip(s, dr.minimum(zl, zh), dr.maximum(zl, zh))
-    e = s - ray.s_star
-    r2 = dr.fma(ray.a, e * e, ray.r0sq)
-    # Nearest radius within [rmin, rmax], a few ulps inside
-    r2_in = dr.clip(r2, box.y * (1.0 + 4.0 * dr.epsilon(mi.Float)),
-                    box.x * box.x * (1.0 - 4.0 * dr.epsilon(mi.Float)))
-    e_in = dr.copysign(dr.sqrt(dr.maximum(r2_in - ray.r0sq, 0.0) * ray.inv_a), e)
-    return dr.select(r2 == r2_in, s, ray.s_star + e_in)
+    lo, hi = dr.minimum(zl, zh), dr.maximum(zl, zh)
+    ulps = 4.0 * dr.epsilon(mi.Float)
+    # The ray is within [rmin, rmax] where g <= |s - s*| <= g_max
+    g = dr.sqrt(dr.maximum(box.y - ray.r0sq, 0.0) * ray.inv_a) * (1.0 + ulps)
+    g_max = dr.sqrt(dr.maximum(box.x * box.x - ray.r0sq, 0.0) * ray.inv_a) * (1.0 - ulps)
+    far = box.x * box.x < ray.r0sq
+    best_s, best_d = mi.Float(s), mi.Float(dr.inf)
+    for a, b in ((ray.s_star - g_max, ray.s_star - g), (ray.s_star + g, ray.s_star + g_max)):
+        a, b = dr.maximum(a, lo), dr.minimum(b, hi)
+        near = dr.clip(s, a, b)
+        take = (a <= b) & ~far & (dr.abs(near - s) < best_d)
+        best_s = dr.select(take, near, best_s)
+        best_d = dr.select(take, dr.abs(near - s), best_d)
+    return best_s
 
 
 def _bezier_square(p: list) -> list:
@@ -803,14 +809,16 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     every line. A tangent (double) root reports two crossings (both branches
     of a pair that float32 cannot resolve, else the same point twice): at
     the interval's upper end ``x1``, when ``|f1|`` is within float32 noise
-    of 0 without a sign change (the lower end belongs to the interval, or
-    the leaf, before), where ``touch`` (False where ``F`` is monotonic on
-    the leaf: no double root). See the module docstring for the choice of
-    ``s``."""
+    of 0 without a sign change (the lower end belongs to the interval
+    before), where ``x1`` is a critical point inside the leaf and
+    ``touch`` (False where ``F`` is monotonic on the leaf: no double root).
+    (At a joint ``F`` within noise of 0 is mostly a crossing that float32
+    cannot place on either leaf, which one of them reports; a tangent there
+    counts as none.) See the module docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
     u, found = root
-    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & touch
+    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & touch
     u = dr.select(found, u, x1)
     Rt = _polyval(lf.R, u)
     R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
