@@ -6,7 +6,13 @@ of times. Prints the leak count and rate per test curve (a closed periodic
 ring, an open egg, the 12-segment glass) and in total. Then the spawn-ray
 parity walk of ``scripts/leak_test.py`` (restarts from ``si.spawn_ray``,
 exact kernel against Mitsuba's mesh) through the paper's B-spline glass
-(``scenes/paper/glass_bspline.csv``) on a third as many rays.
+(``scenes/paper/glass_bspline.csv``) on a third as many rays. Last, the
+offset-free walk (``next_crossing_bspline``: every query from the ray's
+first origin, for the crossing after the last one) and the one-query count
+(``count_crossings_bspline``) on as many rays again, shared among the test
+curves and the points of every ``scenes/*.csv`` and ``scenes/paper/*.csv``
+taken as B-spline control points (rays aimed at random points, at the
+leaves' joints and next to them).
 
     python scripts/leak_test_bspline.py [N_RAYS] [--variant llvm_ad_rgb]   (default 1e6 rays in all)
 """
@@ -15,9 +21,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lathe_shape.tools import leaks
+from lathe_shape.tools import bspline_leaks, leaks
 
-GLASS = Path(__file__).resolve().parents[1] / "scenes" / "paper" / "glass_bspline.csv"
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+GLASS = SCENES / "paper" / "glass_bspline.csv"
 
 
 def main() -> None:
@@ -38,6 +45,10 @@ def main() -> None:
     counts = leaks.scene_parity_leaks(str(GLASS), n_rays // 3, seed=7, mesh_segments=args.mesh_segments,
                                       chunk=args.chunk, kind="bspline")
     print(leaks.parity_summary("glass_bspline", counts))
+    files = sorted(str(path) for path in [*SCENES.glob("*.csv"), *SCENES.glob("paper/*.csv")])
+    for name, counts in bspline_leaks.walk_leak_table(files, n_rays, chunk=args.chunk):
+        label = str(Path(name).relative_to(SCENES)) if name.startswith(str(SCENES)) else name
+        print(bspline_leaks.walk_summary(label, counts), flush=True)
 
 
 if __name__ == "__main__":

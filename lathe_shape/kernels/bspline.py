@@ -42,10 +42,35 @@ of ``R`` and ``Z`` and is handled exactly like a B-spline.
 
 Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
 then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
-covers ``t = t0 + h u``, ``u`` in [0, 1], padded by ``_T_PAD`` in ``t`` on
-both sides (hits on a joint are found by both neighbours), and stores its
-cubics in that local parameter, both in power form and as Bernstein (Bezier)
-control points, plus an exact, padded annular bounding box.
+covers ``t = t0 + h u``, ``u`` in [0, 1] (no overlap with its neighbours),
+and stores its cubics in that local parameter, both in power form and as
+Bernstein (Bezier) control points, plus an exact, padded annular bounding
+box. Its first and last control points are its joints: one float32 point per
+joint, stored bit for bit alike in the two leaves that meet there (also
+where segments meet, and where a closed curve closes).
+
+Joints: parity first. A ray aimed at a joint may, after float32 rounding,
+find a root on both leaves or on neither. Each leaf therefore first fixes
+the parity of its crossings from the signs of ``F`` at its two joints (the
+end values of its Bernstein form, computed from the shared points by the
+same operations in both leaves; a point with ``R < r0`` counts as positive
+whatever float32 says, since ``F`` is positive there): odd exactly when they
+differ. ``F`` changes sign, strictly (0 counts as positive), on an odd
+number of the leaf's monotonic intervals exactly then, and each such
+interval reports one crossing; a tangent root reports two (see
+:func:`_take_interval`). So the parities of all leaves add up to an even
+number of crossings for every line through a closed profile: a ray that
+enters leaves. The roots only say where those crossings are.
+
+Walking a ray through its crossings. Restarting a ray past a hit (Mitsuba's
+``spawn_ray`` offsets the origin) makes a new line and can skip a second
+crossing closer than the offset. :func:`next_crossing_bspline` instead keeps
+the ray's origin and asks for the crossing after the one just taken,
+ordered by ray parameter, then by a key (leaf and root): each crossing of
+the line is found exactly once. Its traversal culls boxes between the last
+crossing and the best one so far, and keeps every crossing within its
+leaf's box (:func:`_into_box`), so that no crossing in between is culled.
+:func:`count_crossings_bspline` counts them all in one traversal.
 
 Culling (the skeleton shared with the polyline kernel, kernels/common.py):
 a bounding volume hierarchy over the leaves' annular boxes in the
@@ -131,6 +156,8 @@ __all__ = [
     "build_cubic_data",
     "intersect_bspline",
     "occluded_bspline",
+    "count_crossings_bspline",
+    "next_crossing_bspline",
     "bspline_geometry",
 ]
 
@@ -148,7 +175,8 @@ _LEAF_STRIDE = 20
 #: Longest leaf, in segment parameter t (before padding).
 _LEAF_T = 0.25
 
-#: Parameter overlap: leaves extend _T_PAD beyond their piece in t.
+#: How far, in segment parameter t, the polish may move a hit past the
+#: segment's ends.
 _T_PAD = 1e-3
 
 #: Newton/bisection steps for critical points and for the roots of F.
@@ -170,6 +198,10 @@ _TANGENT_ULPS = 8.0
 
 #: Width of an unresolved root pair in z, in units of sqrt(tol / a).
 _PAIR_WIDTH = 4.0
+
+#: Crossing keys per leaf (next_crossing_bspline): two per monotonic
+#: interval of F, at most six intervals.
+_KEYS_PER_LEAF = 16
 
 
 class BSplineData(LatheData):
@@ -247,6 +279,22 @@ def _bezier(p: np.ndarray) -> np.ndarray:
     return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
 
 
+def _shared_joints(coef: np.ndarray, pieces: list) -> list:
+    """Per leaf ``(i, ta, tb)`` of ``pieces`` (in profile order), its start and
+    end point ``((R, Z), (R, Z))`` as float32 values (``R^2`` for the sor
+    kind), one value per joint: where a leaf ends where the next one (or, for
+    a closed curve, the first one) starts (within float64 rounding of the
+    segment cubics), both get the same point."""
+    P = np.polynomial.polynomial
+    ends = [[P.polyval(t, coef[i].T) for t in (ta, tb)] for i, ta, tb in pieces]
+    n = len(ends)
+    for k in range(n):
+        nxt = (k + 1) % n
+        if np.max(np.abs(ends[k][1] - ends[nxt][0])) <= 1e-9:
+            ends[k][1] = ends[nxt][0]
+    return [[tuple(np.float32(p)) for p in pair] for pair in ends]
+
+
 def build_bspline_data(seg_ctrl: np.ndarray, free_ends: bool = False) -> BSplineData:
     """Pack validated per-segment control points (from
     :func:`lathe_shape.profiles.bspline.bspline_segments`, oriented clockwise) into
@@ -281,9 +329,8 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
     square ``R`` (``F`` of eqs. 13-15 drops to degree 3 when ``Z`` is linear),
     and the segments' ``R`` slots hold ``R^2`` in the unit frame.
 
-    ``free_ends``: the curve is an open sheet, whose first and last leaves
-    are not padded beyond its ends (the pad lets neighbouring leaves overlap
-    at a joint; at a free end it would extend the sheet)."""
+    ``free_ends``: the curve is an open sheet (accepted for the callers;
+    leaves are not padded in ``t``, so a free end needs nothing else)."""
     coef = np.array(coef, dtype=np.float64)
     pts = _curve_hull(coef, r_squared) if hull is None else np.asarray(hull, dtype=np.float64)
     size, z_c, frame = unit_frame("build_bspline_data()", float(np.abs(pts[:, 0]).max()),
@@ -294,21 +341,23 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
     n_seg = len(coef)
     # Padding (unit frame): float32 rounding of the data and of the ray.
     pad = 1e-5 * float(np.linalg.norm(np.ptp(pts, axis=0))) / size
+    pieces = [(i, ta, tb) for i in range(n_seg) for ta, tb in _leaf_pieces(coef[i])]
+    ends = _shared_joints(coef, pieces)
     leaves, boxes = [], []
-    for i in range(n_seg):
-        for ta, tb in _leaf_pieces(coef[i]):
-            pad_lo = 0.0 if free_ends and i == 0 and ta == 0.0 else _T_PAD
-            pad_hi = 0.0 if free_ends and i == n_seg - 1 and tb == 1.0 else _T_PAD
-            t0, h = ta - pad_lo, tb - ta + pad_lo + pad_hi
-            rp = _reparam(coef[i, 0], t0, h)
-            zp = _reparam(coef[i, 1], t0, h)
-            rmin, rmax = _cubic_range(rp, 0.0, 1.0)
-            if r_squared:
-                rmin, rmax = math.sqrt(max(rmin, 0.0)), math.sqrt(max(rmax, 0.0))
-            zmin, zmax = _cubic_range(zp, 0.0, 1.0)
-            leaves.append(np.concatenate([_bezier(rp), _bezier(zp), rp, zp,
-                                          [t0, h, i, float(r_squared)]]))
-            boxes.append([max(rmin - pad, 0.0), rmax + pad, zmin - pad, zmax + pad])
+    for (i, ta, tb), (start, end) in zip(pieces, ends, strict=True):
+        rp = _reparam(coef[i, 0], ta, tb - ta)
+        zp = _reparam(coef[i, 1], ta, tb - ta)
+        rmin, rmax = _cubic_range(rp, 0.0, 1.0)
+        if r_squared:
+            rmin, rmax = math.sqrt(max(rmin, 0.0)), math.sqrt(max(rmax, 0.0))
+        zmin, zmax = _cubic_range(zp, 0.0, 1.0)
+        rb, zb = _bezier(rp), _bezier(zp)
+        # The end control points are the leaf's joints, shared bit for bit
+        # with the neighbouring leaf (the parity rule of _take_interval)
+        (rb[0], zb[0]), (rb[3], zb[3]) = start, end
+        leaves.append(np.concatenate([rb, zb, rp, zp, [ta, tb - ta, i, float(r_squared)]]))
+        boxes.append([max(min(rmin, rb[0], rb[3]) - pad, 0.0), max(rmax, rb[0], rb[3]) + pad,
+                      min(zmin, zb[0], zb[3]) - pad, max(zmax, zb[0], zb[3]) + pad])
     boxes = np.array(boxes)
     # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
     def record(b):
@@ -409,16 +458,24 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
 
 
-def _bracket_roots(c: list, dc: list, brackets: list, steps: int) -> list:
+def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False) -> list:
     """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
     of one polynomial at once (``mask``: lanes that search it, ``None``:
     all), in one symbolic loop: every bracket takes the same steps as on its
     own (a converged bracket's point stays put), so the results are the
     same, and a kernel holds one loop instead of one per bracket (fewer
-    loops make faster LLVM code, even where they seldom run)."""
+    loops make faster LLVM code, even where they seldom run).
+
+    ``strict``: a root is found exactly where ``f0 < 0`` and ``f1 < 0``
+    differ (0 counts as positive), so that along a chain of brackets the
+    found roots change the sign as often as the ends do (the parity rule of
+    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0."""
     state, starts = [], []
     for x0, x1, f0, f1, mask in brackets:
-        found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
+        if strict:
+            found = (f0 < 0) != (f1 < 0)
+        else:
+            found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
         if mask is not None:
             found &= mask
         a, b = mi.Float(x0), mi.Float(x1)  # bracket [a, b]; f(a) has the sign of f0
@@ -502,14 +559,17 @@ class _Ray(LatheRay):
     """The common ray set-up (kernels/common.py) for a unit direction, so that
     ``s`` is a length, plus the ray's closest approach to the axis."""
 
-    def __init__(self, data: BSplineData, o, d, tmax, active):
+    def __init__(self, data: BSplineData, o, d, tmax, active, mode: str = "nearest"):
         super().__init__(data, o, d, tmax, active)
+        self.mode = mode  # how crossings are taken (_offer)
+        self.after = None  # keyed: the crossing (s, key) to find the next one after
         a, b, c = self.a, self.b, self.c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
         horiz = a > 1e-12
         # Closest approach to the axis (xy): s*, at distance sqrt(r0sq)
         self.s_star = dr.select(horiz, -b / a, 0.0)
         self.r0sq = dr.select(horiz, self.cross * self.cross / a, c)
         self.zc = dr.fma(self.d.z, self.s_star, self.o.z)  # z* = z at the closest approach
+        self.inv_a = dr.rcp(dr.maximum(a, 1e-30))
 
     def reaches(self, lo, hi, r2):
         """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
@@ -534,6 +594,35 @@ def _box_enter(ray: _Ray, box, best, active):
     e = dr.clip(ray.s_star, lo, hi) - ray.s_star
     inner = dr.fma(ray.a, e * e, ray.r0sq) <= box.x * box.x
     return active & (lo <= hi) & inner & ray.reaches(lo, hi, box.y)
+
+
+def _into_box(ray: _Ray, box, s):
+    """``s`` moved (where needed) to the nearest point at which the ray is
+    within the annular box ``(rmax, rmin^2, zmin, zmax)`` as
+    :func:`_box_enter` computes it: in the box's z slab, with ``r(s)^2 =
+    a (s - s*)^2 + r0^2`` between ``rmin^2`` and ``rmax^2`` (a few ulps
+    inside), on either side of ``s*``. :func:`_box_enter` is monotonic in
+    the box and in its interval of ``s``, so a leaf's crossing moved into
+    its box is never culled, by its own box or by an inner node's, while it
+    lies between the walk's last crossing and the best one so far (the
+    keyed walk, :func:`_offer`). Only a crossing that the root finder
+    places outside its leaf's box (an ill-conditioned root) moves."""
+    zl = (box.z - ray.o.z) * ray.inv_dz
+    zh = (box.w - ray.o.z) * ray.inv_dz
+    lo, hi = dr.minimum(zl, zh), dr.maximum(zl, zh)
+    ulps = 4.0 * dr.epsilon(mi.Float)
+    # The ray is within [rmin, rmax] where g <= |s - s*| <= g_max
+    g = dr.sqrt(dr.maximum(box.y - ray.r0sq, 0.0) * ray.inv_a) * (1.0 + ulps)
+    g_max = dr.sqrt(dr.maximum(box.x * box.x - ray.r0sq, 0.0) * ray.inv_a) * (1.0 - ulps)
+    far = box.x * box.x < ray.r0sq
+    best_s, best_d = mi.Float(s), mi.Float(dr.inf)
+    for a, b in ((ray.s_star - g_max, ray.s_star - g), (ray.s_star + g, ray.s_star + g_max)):
+        a, b = dr.maximum(a, lo), dr.minimum(b, hi)
+        near = dr.clip(s, a, b)
+        take = (a <= b) & ~far & (dr.abs(near - s) < best_d)
+        best_s = dr.select(take, near, best_s)
+        best_d = dr.select(take, dr.abs(near - s), best_d)
+    return best_s
 
 
 def _bezier_square(p: list) -> list:
@@ -604,11 +693,51 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
 # Per-leaf solve
 # ---------------------------------------------------------------------------
 
+class _Best(metaclass=common._VariantStruct):
+    """The crossings found so far on a ray: the first one in the ray's order
+    (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its curve
+    parameter ``u``, segment ``seg`` and crossing key ``key``, and ``count``,
+    the number of crossings (counting rays only)."""
+
+    _FIELDS = {"s": "Float", "u": "Float", "seg": "UInt32", "key": "UInt32", "count": "UInt32"}
+
+    def __init__(self, s=None, u=None, seg=None, key=None, count=None) -> None:
+        self.s = mi.Float(dr.inf) if s is None else s
+        self.u = mi.Float(0.0) if u is None else u
+        self.seg = mi.UInt32(0) if seg is None else seg
+        self.key = mi.UInt32(0) if key is None else key
+        self.count = mi.UInt32(0) if count is None else count
+
+
+def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
+    """``best`` with the crossing ``(s, key)`` at curve parameter ``t`` on
+    segment ``seg`` (lanes ``ok``) taken into account, as the ray's mode
+    says: ``nearest``, the least ``s`` after ``s_lo`` (ties: the first
+    offered); ``keyed``, the least ``(s, key)`` after ``ray.after`` (ties in
+    ``s`` broken by the key, so that a walk through a ray's crossings finds
+    each once); ``count``, every crossing after ``s_lo``."""
+    ok = ok & dr.isfinite(s)
+    if ray.mode == "count":
+        return _Best(best.s, best.u, best.seg, best.key,
+                     best.count + mi.UInt32(ok & (s > ray.s_lo) & (s < ray.s_max)))
+    if ray.mode == "keyed":
+        after_s, after_key = ray.after
+        take = ok & ((s > after_s) | ((s == after_s) & (key > after_key)))
+        take &= (s < best.s) | ((s == best.s) & (key < best.key))
+        key = dr.select(take, key, best.key)
+    else:
+        take = ok & (s > ray.s_lo) & (s < best.s)
+        key = best.key  # unused: no work on the hot path
+    return _Best(dr.select(take, s, best.s), dr.select(take, t, best.u),
+                 dr.select(take, seg, best.seg), key, best.count)
+
+
 class _Leaf:
     """A candidate leaf's cubics (local parameter u), its placement in the
-    segment (t = t0 + h u), F in power form and its error bound."""
+    segment (t = t0 + h u), F in power form and its error bound, and the
+    first crossing key of the leaf (:func:`_offer`)."""
 
-    def __init__(self, data: BSplineData, leaf, ray: _Ray, m):
+    def __init__(self, data: BSplineData, node, leaf, ray: _Ray, m):
         base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
@@ -616,10 +745,18 @@ class _Leaf:
         Zp = dr.gather(mi.Vector4f, data.leaf, base + 3, m)
         meta = dr.gather(mi.Vector4f, data.leaf, base + 4, m)
         self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
+        self.key = leaf * _KEYS_PER_LEAF
+        if ray.mode == "keyed":
+            # Crossings stay within the leaf's box (_into_box)
+            self.box = dr.gather(mi.Vector4f, data.nodes, node, m)
         self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
         self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
         self.squared = _squared(data)  # R holds R^2 (eq. 20)
         self.Gb, self.tol = _hull(Rb, Zb, ray, self.squared)
+        # F at the leaf's ends, from the joints it shares with its
+        # neighbours: their signs fix the parity of its crossings
+        self.f0 = _side(self.Gb[0], _by_form(self.squared, lambda: Rb.x, lambda: Rb.x * Rb.x), ray)
+        self.f1 = _side(self.Gb[6], _by_form(self.squared, lambda: Rb.w, lambda: Rb.w * Rb.w), ray)
         # F = a (Z - z*)^2 - d_z^2 (R^2 - r0^2)      (eqs. 13-15, times d_z^2)
         W = [self.Z[0] - ray.zc] + self.Z[1:]
         W2 = _polymul(W, W)
@@ -631,38 +768,70 @@ class _Leaf:
         self.dF = _polyder(self.F)
 
 
+def _side(f, R2, ray: _Ray):
+    """The value ``f`` of ``F`` at a curve point with ``R^2 = R2``, made
+    non-negative where ``R < r0``: there ``F = a W^2 + d_z^2 (r0^2 - R^2)``
+    is positive (the point lies inside the ray's surface of revolution),
+    whatever float32 makes of it (for a nearly horizontal ray ``F`` is then
+    ``a W^2`` up to noise, and a noisy sign would pair two phantom
+    crossings). Only the sign is used: the parity of the crossings, strictly
+    ``f < 0`` or not."""
+    return dr.select(R2 < ray.r0sq * (1.0 - _R0_REL_TOL), dr.maximum(f, 0.0), f)
+
+
+def _value(lf: _Leaf, ray: _Ray, x):
+    """``F(x)`` on the leaf, for its sign (:func:`_side`)."""
+    Rx = _polyval(lf.R, x)
+    return _side(_polyval(lf.F, x), _by_form(lf.squared, lambda: Rx, lambda: Rx * Rx), ray)
+
+
 def _interval_roots(lf: _Leaf, intervals: list) -> list:
     """The roots ``(u, found)`` of ``F`` on the intervals ``(x0, x1, f0, f1,
     mask)`` where it is monotonic (values ``f0``, ``f1`` at the ends), for
-    :func:`_take_interval`: one loop for all (:func:`_bracket_roots`)."""
-    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT)
+    :func:`_take_interval`: one loop for all (:func:`_bracket_roots`), a
+    root where the signs of the ends differ (strictly)."""
+    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True)
 
 
-def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best_s, best_u, best_seg, m):
-    """The root of ``F`` on [x0, x1], where it is monotonic (values ``f0``,
-    ``f1`` at the ends; ``root``: from :func:`_interval_roots`), or a
-    tangent root at an end; updates the nearest hit. See the module
-    docstring for the choice of ``s``."""
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, slot: int,
+                   touch=True) -> _Best:
+    """The crossings of the ray on [x0, x1], where ``F`` is monotonic
+    (values ``f0``, ``f1`` at the ends; ``root``: from
+    :func:`_interval_roots`), offered to ``best`` (:func:`_offer`) with the
+    keys ``lf.key + 2 slot`` and ``+ 1``.
+
+    Parity first: along the leaf's intervals ``f1`` of one is ``f0`` of the
+    next, and the leaf's first and last values are ``F`` at its joints,
+    evaluated bit for bit alike by both leaves that share one. An interval
+    where ``f0 < 0`` and ``f1 < 0`` differ reports exactly one crossing, so
+    every leaf reports as many crossings, modulo 2, as its joints' signs
+    differ, and the leaves of a closed profile add up to an even number for
+    every line. A tangent (double) root reports two crossings (both branches
+    of a pair that float32 cannot resolve, else the same point twice): at
+    the interval's upper end ``x1``, when ``|f1|`` is within float32 noise
+    of 0 without a sign change (the lower end belongs to the interval
+    before), where ``x1`` is a critical point inside the leaf and
+    ``touch`` (False where ``F`` is monotonic on the leaf: no double root).
+    (At a joint ``F`` within noise of 0 is mostly a crossing that float32
+    cannot place on either leaf, which one of them reports; a tangent there
+    counts as none.) See the module docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
     u, found = root
-    # No sign change: a tangent (double) root at the endpoint with the
-    # smaller |F|, if that is within float32 noise of 0.
-    fmin = dr.minimum(dr.abs(f0), dr.abs(f1))
-    near0 = dr.abs(f0) <= dr.abs(f1)
-    tangent = ~found & (fmin <= tol)
-    u = dr.select(found, u, dr.select(near0, x0, x1))
+    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & touch
+    u = dr.select(found, u, x1)
     Rt = _polyval(lf.R, u)
     R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
-    Zt = _polyval(lf.Z, u)
-    # A real hit has R(t) >= the ray's distance r0 from the axis. For
+    Zt, dZ = _polyval_d(lf.Z, u)
+    # A real tangent has R(t) >= the ray's distance r0 from the axis. For
     # (nearly) horizontal rays F ~ a W^2 has lost R altogether, and its
-    # tangent roots at Z(t) = o_z must be checked against it.
-    ok = m & (found | tangent) & (R2t >= ray.r0sq * (1.0 - _R0_REL_TOL))
+    # tangent roots at Z(t) = o_z must be checked against it. (A sign
+    # change is a crossing whatever float32 says of R.)
+    touching = m & tangent & (R2t >= ray.r0sq * (1.0 - _R0_REL_TOL))
     # s from eq. 15 for steep rays; else from |o_xy + s d_xy| = R(t),
-    # s = s* -+ h, choosing the branch(es) consistent with z.
+    # s = s* -+ h, choosing the branch consistent with z.
     steep = dz * dz >= ray.a
-    inv_a = dr.rcp(dr.maximum(ray.a, 1e-30))
+    inv_a = ray.inv_a
     s_z = (Zt - o.z) * dr.rcp(dz)
     hh = dr.sqrt(dr.maximum(R2t - ray.r0sq, 0.0) * inv_a)
     s1 = ray.s_star - hh
@@ -671,52 +840,61 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best_s, best_u, b
     e2 = dr.abs(dr.fma(s2, dz, o.z) - Zt)
     # A root pair of a nearly horizontal ray that float32 cannot resolve
     # (a tangent root, or a root next to a critical point where |F| is
-    # within noise) stands for both branches: keep both when both z errors
-    # are within the pair width allowed by the noise of F
-    # (|F| <= tol near a root pair allows |W1 - W2| up to ~2 sqrt(tol / a)).
+    # within noise) stands for both branches when both z errors are within
+    # the pair width allowed by the noise of F (|F| <= tol near a root pair
+    # allows |W1 - W2| up to ~2 sqrt(tol / a)): a tangent takes both. A
+    # root with a sign change is one crossing, on the branch whose z fits
+    # better; in an unresolved pair around an interior critical point c of
+    # F, where that cannot tell, the root lies above z* (W > 0, the branch
+    # s > s* when d_z >= 0) when it is on the side of c where Z rises, so
+    # the two roots take the two branches.
     z_tol = _PAIR_WIDTH * dr.sqrt(tol * inv_a)
-    both = (tangent | (found & (fmin <= tol))) & (dr.maximum(e1, e2) <= z_tol)
-    cand_a = dr.select(steep, s_z, s1)
-    ok_a = ok & (steep | (e1 <= e2) | both)
-    ok_b = ok & ~steep & ((e2 < e1) | both)
+    unresolved = dr.maximum(e1, e2) <= z_tol
+    both = tangent & unresolved
+    near0 = dr.abs(f0) <= dr.abs(f1)  # the end nearer a root pair's centre
+    centre = dr.select(near0, x0, x1)
+    pair = found & unresolved & (dr.minimum(dr.abs(f0), dr.abs(f1)) <= tol) & (centre > 0) & (centre < 1)
+    above = (dZ > 0) == near0
+    take1 = dr.select(pair, above != (dz >= 0), (e1 <= e2) | both)
+    first = dr.select(steep, s_z, dr.select(take1, s1, s2))
+    second = dr.select(steep, s_z, dr.select(both, s2, first))
+    if ray.mode == "keyed":
+        first, second = _into_box(ray, lf.box, first), _into_box(ray, lf.box, second)
     t = dr.fma(lf.h, u, lf.t0)
-    for s, oks in ((cand_a, ok_a), (s2, ok_b)):
-        take = oks & (s > ray.s_lo) & (s < best_s) & dr.isfinite(s)
-        best_s = dr.select(take, s, best_s)
-        best_u = dr.select(take, t, best_u)
-        best_seg = dr.select(take, lf.seg, best_seg)
-    return best_s, best_u, best_seg
+    best = _offer(best, ray, first, t, lf.seg, lf.key + 2 * slot, m & (found | touching))
+    return _offer(best, ray, second, t, lf.seg, lf.key + (2 * slot + 1), touching)
 
 
-def _solve_chain(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
+def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
     """General leaf: all critical points of F by the derivative chain, then
-    its six monotonic intervals."""
+    its six monotonic intervals (the leaf's ends valued at its joints)."""
     lo, hi = mi.Float(0.0), mi.Float(1.0)
     derivs = [lf.F, lf.dF]
     for _ in range(4):
         derivs.append(_polyder(derivs[-1]))
     xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
-    fs = [_polyval(lf.F, x) for x in xs]
+    fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
     intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
-    for interval, root in zip(intervals, _interval_roots(lf, intervals), strict=True):
-        best_s, best_u, best_seg = _take_interval(lf, ray, *interval[:4], root, best_s, best_u, best_seg, m)
-    return best_s, best_u, best_seg
+    for slot, (interval, root) in enumerate(zip(intervals, _interval_roots(lf, intervals), strict=True)):
+        best = _take_interval(lf, ray, *interval[:4], root, best, m, slot)
+    return best
 
 
 @dr.syntax
-def _solve_leaf(data: BSplineData, leaf, ray: _Ray, best_s, best_u, best_seg, m):
-    """Intersect leaf ``leaf`` (lanes ``m``); return the updated nearest hit.
+def _solve_leaf(data: BSplineData, node, leaf, ray: _Ray, best: _Best, m) -> _Best:
+    """Intersect leaf ``leaf`` (BVH node ``node``, lanes ``m``); return the
+    updated crossings.
     Lanes where the Bernstein hull of ``F`` excludes a root (or a grazing
     contact) on the leaf skip the solve."""
-    lf = _Leaf(data, leaf, ray, m)
+    lf = _Leaf(data, node, leaf, ray, m)
     m = m & ~_one_sign(lf.Gb, lf.tol)
     if m:
-        best_s, best_u, best_seg = _solve_body(lf, ray, best_s, best_u, best_seg, m)
-    return best_s, best_u, best_seg
+        best = _solve_body(lf, ray, best, m)
+    return best
 
 
 @dr.syntax
-def _solve_body(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
+def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
     """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
     # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
     # first and second differences of those of F, with errors below 2 tol
@@ -727,57 +905,55 @@ def _solve_body(lf: _Leaf, ray: _Ray, best_s, best_u, best_seg, m):
     mono = _one_sign(db, 2.0 * lf.tol)
     simple = mono | _one_sign(ddb, 4.0 * lf.tol)
     # F' keeps its sign: F is monotonic on [0, 1] (most leaves), one
-    # interval. Else F'' keeps its sign: F' is monotonic, F has at most one
-    # critical point c (none: c = 1) and at most two roots, on [0, c] and
-    # [c, 1]; packets without such a lane skip that work.
+    # interval, and no tangent. Else F'' keeps its sign: F' is monotonic, F
+    # has at most one critical point c (none: c = 1) and at most two roots,
+    # on [0, c] and [c, 1]; packets without such a lane skip that work.
     fast = m & simple
     split = fast & ~mono
     c = mi.Float(1.0)            # the critical point (1: none)
-    f_c = sum(lf.F[1:], lf.F[0])  # F(c)
+    f_c = mi.Float(lf.f1)        # F(c)
     if split:
         c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
                              sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
-        f_c = _polyval(lf.F, c)
-    f_1 = sum(lf.F[1:], lf.F[0])  # F(1)
-    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.F[0], f_c, fast),
-                                         (c, mi.Float(1.0), f_c, f_1, split)])
-    best_s, best_u, best_seg = _take_interval(lf, ray, mi.Float(0.0), c, lf.F[0], f_c, first,
-                                              best_s, best_u, best_seg, fast)
+        f_c = _value(lf, ray, c)
+    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.f0, f_c, fast),
+                                         (c, mi.Float(1.0), f_c, lf.f1, split)])
+    best = _take_interval(lf, ray, mi.Float(0.0), c, lf.f0, f_c, first, best, fast, 0, ~mono)
     if split:
-        best_s, best_u, best_seg = _take_interval(lf, ray, c, mi.Float(1.0), f_c, f_1, second,
-                                                  best_s, best_u, best_seg, split)
+        best = _take_interval(lf, ray, c, mi.Float(1.0), f_c, lf.f1, second, best, split, 1)
     slow = m & ~simple
     if slow:
-        best_s, best_u, best_seg = _solve_chain(lf, ray, best_s, best_u, best_seg, slow)
-    return best_s, best_u, best_seg
+        best = _solve_chain(lf, ray, best, slow)
+    return best
 
 
 @dr.syntax
-def _trace(data: BSplineData, o, d, tmax, active, shadow: bool):
-    ray = _Ray(data, o, d, tmax, active)
+def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
+    """The crossings of ``ray`` in its mode (:func:`_offer`): ``(hit,
+    best)``, ``hit`` the first one, polished unless ``shadow``; a shadow
+    ray's walk ends at the first crossing found (a counting ray never takes
+    one: it walks on, unpolished)."""
     active = ray.active
     node = mi.UInt32(ray.first) # current node of this ray's BVH copy
     end = ray.end               # one past this copy's last node
-    best_s = mi.Float(ray.s_max)  # nearest accepted s so far (moved frame)
-    best_u = mi.Float(0.0)      # its curve parameter t
-    best_seg = mi.UInt32(0)     # its segment
+    best = _Best(s=mi.Float(ray.s_max))  # crossings so far (moved frame)
     hit = mi.Bool(False)        # a hit was found (ends shadow rays)
     cand = mi.Bool(False)       # node is a leaf to solve
     while active & (node < end) & ~(hit & shadow):
         # Walk the tree to the next candidate leaf.
         cand = mi.Bool(False)
         while active & (node < end) & ~cand:
-            cand, node = _visit(data, ray, node, best_s, active & (node < end))
+            cand, node = _visit(data, ray, node, best.s, active & (node < end))
         leaf = common.bvh_link(data.links, node, cand)[2]
-        prev = mi.Float(best_s)
-        best_s, best_u, best_seg = _solve_leaf(data, leaf, ray, best_s, best_u, best_seg, cand)
-        hit |= best_s < prev
+        best = _solve_leaf(data, node, leaf, ray, best, cand)
+        hit |= best.s < ray.s_max
         node = dr.select(cand, node + 1, node)
-    valid = hit & (best_s < ray.s_max)
+    valid = best.s < ray.s_max
+    s, u = best.s, best.u
     if not shadow:
-        best_s, best_u = _polish(data, ray, best_s, best_u, best_seg, valid)
-    t = dr.select(valid, (best_s + ray.s_enter) * ray.t_scale, dr.inf)
-    return BSplineHit(t=t, seg=best_seg, u=dr.clip(best_u, 0.0, 1.0), valid=valid)
+        s, u = _polish(data, ray, s, u, best.seg, valid)
+    t = dr.select(valid, (s + ray.s_enter) * ray.t_scale, dr.inf)
+    return BSplineHit(t=t, seg=best.seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
 
 
 def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
@@ -823,14 +999,63 @@ def intersect_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f,
                       tmax: mi.Float, active: mi.Bool) -> BSplineHit:
     """Nearest hit of the rays ``o + s d`` (local frame, ``d`` not
     necessarily unit) with ``0 < s < tmax`` on the revolved B-spline."""
-    return _trace(data, o, d, mi.Float(tmax), active, False)
+    return _trace(data, _Ray(data, o, d, mi.Float(tmax), active))[0]
 
 
 def occluded_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f,
                      tmax: mi.Float, active: mi.Bool) -> mi.Bool:
     """Whether the rays hit the surface at some ``0 < s < tmax`` (stops at
     the first hit found, not necessarily the nearest)."""
-    return _trace(data, o, d, mi.Float(tmax), active, True).valid
+    return _trace(data, _Ray(data, o, d, mi.Float(tmax), active), True)[0].valid
+
+
+def count_crossings_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f,
+                            active: mi.Bool) -> mi.UInt32:
+    """Number of crossings of the ray ``o + t d`` (``t > 0``) with the lathe,
+    every one that :func:`next_crossing_bspline` reports (a tangent counts
+    twice). For a ray that starts outside a closed lathe (a profile from
+    the axis to the axis, or a closed loop) the number is even for every
+    line (the parity rule of :func:`_take_interval`)."""
+    ray = _Ray(data, o, d, dr.full(mi.Float, dr.inf, dr.width(o)), active, "count")
+    return _trace(data, ray, shadow=True)[1].count
+
+
+def next_crossing_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
+                          active: mi.Bool, after_s: mi.Float | None = None,
+                          after_key: mi.UInt32 | None = None, after_t: mi.Float | None = None
+                          ) -> tuple[BSplineHit, mi.Float, mi.UInt32]:
+    """The next crossing of the ray ``o + t d`` (``0 < t < tmax``) after the
+    one that a previous call with the same ``o``, ``d`` returned as
+    ``(after_s, after_key)``: ``(hit, s, key)``, ``hit`` as
+    :func:`intersect_bspline` gives it and ``(s, key)`` this crossing's
+    place to pass to the next call (``s`` the kernel's ray parameter,
+    ``key`` unique per crossing, ordering crossings at equal ``s``).
+
+    ``None``: the first crossing with ``t > 0``. ``after_t`` (units of
+    ``d``; ``None``: 0): lanes whose ``after_key`` is ``0xFFFFFFFF`` (or all,
+    without ``after_key``) look for the first crossing with ``t > after_t``
+    instead (one of another shape on the same line). Walking a ray through
+    its crossings this way, from its first origin and without offsets,
+    finds each crossing exactly once, also where two of them are closer
+    than any offset or rounded to the same ``t``: with the parity rule of
+    :func:`_take_interval` a ray from outside a closed lathe then crosses
+    it an even number of times."""
+    ray = _Ray(data, o, d, mi.Float(tmax), active, "keyed")
+    s_from = mi.Float(ray.s_lo)
+    key_from = mi.UInt32(0xFFFFFFFF)
+    if after_s is not None:
+        later = after_s > ray.s_lo
+        s_from = dr.select(later, after_s, s_from)
+        key_from = dr.select(later, after_key, key_from)
+    if after_t is not None:
+        by_t = mi.Bool(True) if after_key is None else after_key == 0xFFFFFFFF
+        s_t = dr.maximum(after_t * dr.rcp(ray.t_scale) - ray.s_enter, ray.s_lo)
+        s_from = dr.select(by_t, s_t, s_from)
+        key_from = dr.select(by_t, 0xFFFFFFFF, key_from)
+    ray.after = (s_from, key_from)
+    ray.s_lo = s_from  # boxes before it need no visit
+    hit, best = _trace(data, ray)
+    return hit, best.s, best.key
 
 
 # ---------------------------------------------------------------------------
