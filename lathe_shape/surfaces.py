@@ -37,6 +37,7 @@ from .kernels.bspline import (
     build_bspline_data,
     build_cubic_data,
     intersect_bspline,
+    next_crossing_bspline,
     occluded_bspline,
 )
 from .kernels.common import LatheGeometry, LatheHit
@@ -163,6 +164,7 @@ class BSplineSurface(_KernelSurface):
     smooth = True
     _intersect = staticmethod(intersect_bspline)
     _occluded = staticmethod(occluded_bspline)
+    _next_crossing = staticmethod(next_crossing_bspline)
 
     def __init__(self, profile: BSplineProfile | SorProfile, max_angle_deg: float = 1.0) -> None:
         self.profile = profile

@@ -11,10 +11,13 @@ import pytest
 mi = pytest.importorskip("mitsuba")
 dr = pytest.importorskip("drjit")
 
+from conftest import ROOT  # noqa: E402
+
 from lathe_shape.kernels import bspline as K  # noqa: E402
 from lathe_shape.kernels.top_level import ProfileTable  # noqa: E402
 from lathe_shape.surfaces import make_surface  # noqa: E402
 from lathe_shape.tools import bspline_leaks as L  # noqa: E402
+from lathe_shape.tools import leaks  # noqa: E402
 from lathe_shape.tools.leaks import parity_rays  # noqa: E402
 
 #: Closed profiles of the other cubic kinds (a sor from the axis to the axis,
@@ -158,3 +161,17 @@ def test_walk_on_a_table_of_profiles():
         assert np.array_equal(K.count_crossings_bspline(view, o32, d32, mi.Bool(True)).numpy(), own)
         walked = _count_in_loop(view, o32, d32).numpy()
         assert np.array_equal(walked, own)
+
+
+@pytest.mark.parametrize("copies", [1, 3])
+def test_lathe_path_walk_through_bspline_has_no_odd_count(copies):
+    """Rays walked as lathe_path walks them (spawn_ray past every hit, the
+    walked line carried from hit to hit) through the paper's B-spline glass,
+    alone or in a lathe set: no odd crossing count (the lathe's query on
+    the spawned rays alone, and Mitsuba's mesh, have some)."""
+    counts = leaks.scene_parity_leaks(str(ROOT / "scenes" / "paper" / "glass_bspline.csv"), 20_000, seed=5,
+                                      kind="bspline", copies=copies)
+    assert counts["hitting_exact"] > 15_000
+    assert counts["odd_exact"] == 0
+    assert counts["odd_offset"] <= counts["odd_mesh"]
+    assert counts["stuck_exact"] == 0

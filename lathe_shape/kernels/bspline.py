@@ -693,7 +693,7 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
 # Per-leaf solve
 # ---------------------------------------------------------------------------
 
-class _Best(metaclass=common._VariantStruct):
+class _Best(metaclass=common.VariantStruct):
     """The crossings found so far on a ray: the first one in the ray's order
     (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its curve
     parameter ``u``, segment ``seg`` and crossing key ``key``, and ``count``,

@@ -122,7 +122,8 @@ KINDS = {
     # The per-profile r_squared_flag lets one kernel serve R and R^2 (sor) profiles.
     "bspline": KindLayout(4, {"seg": bspline._STRIDE}, {"leaf": bspline._LEAF_STRIDE}, False,
                           bspline._LEAF_STRIDE - 2, _FRAME + ("n_seg", "r_squared_flag"),
-                          bspline.intersect_bspline, bspline.occluded_bspline, _bspline_geometry),
+                          bspline.intersect_bspline, bspline.occluded_bspline, _bspline_geometry,
+                          bspline.next_crossing_bspline),
 }
 # The other cubic kinds (surfaces.py) run the B-spline kernel on its data.
 KINDS.update({kind: KINDS["bspline"] for kind in ("bezier", "catmull_rom", "quadratic", "sor")})
