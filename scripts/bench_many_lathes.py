@@ -12,9 +12,8 @@ it). A last line per reference and integrator gives the render-time
 ratio of the largest count to 256 lathes (the target of scenes of many
 lathes: at most 1.2 for ``lathe_path``); ``--integrators lathe_path path``
 adds Mitsuba's stock ``path`` on the same scenes (it traces the proxies).
-Scenes load through `tools.scenes.load_string_in`, which loads scenes of more
-than 64 lathes sequentially (in parallel, hundreds of lathes exceed Python's
-recursion limit).
+Scenes load through `tools.scenes.load_string_in`, which loads them
+sequentially (see `tools.scenes.PARALLEL_LOAD`).
 
     python scripts/bench_many_lathes.py [--counts 1 64 256 1000] [--references mesh proxy] [--buried]
                                         [--integrators lathe_path path]

@@ -250,12 +250,10 @@ def test_proxy_reference_mesh_renders_the_same_exactly():
 
 
 def test_scenes_of_many_lathes_load(tmp_path):
-    """Mitsuba loads shapes in parallel, and a thread waiting for Dr.Jit in
-    one lathe's constructor builds the next one inside that wait: hundreds of
-    lathes nested past Python's recursion limit. Such scenes load
-    sequentially."""
+    """The package loads scenes sequentially (see tools.scenes.PARALLEL_LOAD):
+    1000 lathes load."""
     from lathe_shape.plugin.shape import scene_lathes
-    from lathe_shape.tools.scenes import SEQUENTIAL_LOAD_LATHES, load_scene, parallel_load
+    from lathe_shape.tools.scenes import load_scene
 
     count = 1000
     lathes = "".join(
@@ -265,5 +263,5 @@ def test_scenes_of_many_lathes_load(tmp_path):
         for i in range(count))
     scene_file = tmp_path / "many.xml"
     scene_file.write_text(f'<scene version="3.0.0">{lathes}</scene>')
-    assert not parallel_load(scene_file.read_text()) and count > SEQUENTIAL_LOAD_LATHES
     assert len(scene_lathes(load_scene(scene_file))) == count
+

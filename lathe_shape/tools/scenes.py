@@ -186,30 +186,31 @@ def integrator_name(integrator: mi.Integrator) -> str:
     return integrator.class_name()
 
 
-#: Scenes with more lathes than this are loaded sequentially. Mitsuba loads
-#: shapes in parallel, and a thread that waits for Dr.Jit while building one
-#: lathe runs the next lathe's construction inside that wait: with hundreds
-#: of lathes the nesting grows deep (the package raises Python's recursion
-#: limit for it, see ``lathe_shape.RECURSION_LIMIT``); sequentially, 1000
-#: wine glasses load in 3.7 s and 430 MB with ``reference proxy``.
-SEQUENTIAL_LOAD_LATHES = 64
-
-
-def parallel_load(text: str) -> bool:
-    """Whether scene ``text`` may be loaded in parallel (see
-    :data:`SEQUENTIAL_LOAD_LATHES`)."""
-    return len(re.findall(r"""type\s*=\s*["']lathe["']""", text)) <= SEQUENTIAL_LOAD_LATHES
+#: Scenes are loaded sequentially (``parallel=False``), for two reasons.
+#: Mitsuba's parallel loading registers shapes and BSDFs in whatever order
+#: its threads finish, and the traced render kernel (its virtual calls over
+#: those objects) follows that order: a new process then often traced
+#: another kernel than the ones in Dr.Jit's on-disk cache and compiled it
+#: (0.2 s for the bottle). Measured on the sundae cup, 16 processes (4 at a
+#: time): 4 distinct render kernels loaded in parallel, 2 sequentially (a
+#: variation that remains, and that stock ``path`` shows too). And a thread
+#: that waits for Dr.Jit while building one lathe runs the next lathe's
+#: construction inside that wait: with hundreds of lathes the nesting grows
+#: deep (see ``lathe_shape.RECURSION_LIMIT``). Sequential loading took no
+#: longer on the example scenes (45-58 ms each); 1000 wine glasses load in
+#: 3.7 s and 430 MB with ``reference proxy``.
+PARALLEL_LOAD = False
 
 
 def load_string_in(folder: str | os.PathLike, text: str, **defines: str) -> mi.Scene:
     """``mi.load_string`` with relative file names (profiles, textures)
-    resolved in ``folder``, as if ``text`` were a file there (sequentially
-    for scenes of many lathes, see :data:`SEQUENTIAL_LOAD_LATHES`)."""
+    resolved in ``folder``, as if ``text`` were a file there (sequentially,
+    see :data:`PARALLEL_LOAD`)."""
     resolver = mi.file_resolver()
     saved = mi.FileResolver(resolver)
     resolver.prepend(os.path.abspath(os.fspath(folder)))
     try:
-        return mi.load_string(text, parallel=parallel_load(text), **defines)
+        return mi.load_string(text, parallel=PARALLEL_LOAD, **defines)
     finally:
         mi.set_file_resolver(saved)
 
@@ -290,7 +291,7 @@ def load_scene(
         except SceneSyntaxError as e:
             edited, strict_error = text, e  # Mitsuba reports where the syntax error is
         if edited is text:
-            scene = mi.load_file(path, parallel=parallel_load(text), **defines)
+            scene = mi.load_file(path, parallel=PARALLEL_LOAD, **defines)
         else:
             scene = load_string_in(os.path.dirname(os.path.abspath(path)), edited,
                                    **_still_used(defines, text, edited))
