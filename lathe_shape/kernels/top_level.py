@@ -373,14 +373,14 @@ class LatheSet:
         tmax`` (stops at the first hit found)."""
         return self._trace(o, d, mi.Float(tmax), mi.Bool(active), True).valid
 
-    def _visit(self, node, o, inv_d, t_max, active):
+    def _visit(self, node, o, inv_d, t_min, t_max, active):
         """One step of the top-level walk: ``(candidate, next node)``, a
         candidate being a leaf (lathe) whose box the ray enters within
-        ``[0, t_max]``."""
+        ``[t_min, t_max]``."""
         lo = dr.gather(mi.Vector4f, self.nodes, node * 2, active)
         hi = dr.gather(mi.Vector4f, self.nodes, node * 2 + 1, active)
         link, is_leaf, _ = bvh_link(self.links, node, active)
-        near, far = mi.Float(0.0), mi.Float(t_max)
+        near, far = mi.Float(t_min), mi.Float(t_max)
         for k in range(3):
             t0 = (lo[k] - o[k]) * inv_d[k]
             t1 = (hi[k] - o[k]) * inv_d[k]
@@ -427,10 +427,13 @@ class LatheSet:
         place = None if after is None else dr.zeros(CrossingPlace, dr.width(tmax))
         cand = mi.Bool(False)                  # node is a lathe to intersect
         active = active & (tmax > 0)           # lanes still walking
+        # A walk goes on from its last crossing: lathes wholly behind it
+        # need no visit (slack for the rounding of the slab distances)
+        t_min = 0.0 if after is None else after.t * (1.0 - 1e-6)
         while active & (node < end) & ~(best.valid & shadow):
             cand = mi.Bool(False)
             while active & (node < end) & ~cand:
-                cand, node = self._visit(node, o, inv_d, best.t, active & (node < end))
+                cand, node = self._visit(node, o, inv_d, t_min, best.t, active & (node < end))
             index = bvh_link(self.links, node, cand)[2]
             hit, hit_place = self._lathe_hit(index, o, d, best.t, cand, shadow, after)
             take = cand & hit.valid & (hit.t <= best.t)

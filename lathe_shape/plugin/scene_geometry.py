@@ -28,8 +28,10 @@ A ray that goes on straight past a lathe crossing (the integrator passes
 the :class:`~lathe_shape.plugin.line_walk.LineWalk` of its previous hit to
 :meth:`ExactSceneGeometry.ray_intersect_walk`) queries the lathes on the
 line that crossing was found on, for the crossing after it: no offset, so
-no crossing skipped or taken twice. Mitsuba's shapes are traced along the
-spawned ray as before.
+no crossing skipped or taken twice. Mitsuba's shapes are traced on that
+line too, from the crossing taken; a lathe crossing must come before their
+hit by more than the spawn offset (where a lathe touches a shape, the
+shape wins).
 
 The second scene is built once per set of shapes. A lathe that moves
 (:meth:`LatheShape.set_to_world`) is followed before the next query: its
@@ -212,7 +214,6 @@ class ExactSceneGeometry:
         :meth:`ray_intersect`. Returns the interaction (``t`` along
         ``ray``) and the walk to pass with the next ray."""
         self.follow_moves()
-        pi, si = self._rest_preliminary(ray, active)
         same = mi.Bool(active) & continues_line(ray, walk)
         line = mi.Ray3f(ray)
         line.o = dr.select(same, walk.o, ray.o)
@@ -224,6 +225,15 @@ class ExactSceneGeometry:
         # standing on a floor, bottom and floor coplanar) the shape wins.
         spawn_offset = (1.0 + dr.max(dr.abs(ray.o))) * mi.math.RayEpsilon * dr.rcp(dr.norm(ray.d))
         margin = dr.select(same, spawn_offset, 0.0)
+        # ... both measured on the walked line: the other shapes too are
+        # traced from the crossing taken (which lies on none of them: a tie
+        # there went to the shape), not from the offset origin, which is
+        # off the line (moved along a leaning wall's normal it would put the
+        # floor farther than the glass's coplanar bottom)
+        ray = mi.Ray3f(ray)
+        ray.o = dr.select(same, line(t0), ray.o)
+        ray.d = line.d
+        pi, si = self._rest_preliminary(ray, active)
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
@@ -239,12 +249,14 @@ class ExactSceneGeometry:
                 ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
                 si_lathe, place = lathe.ray_intersect_exact(ray_lathe, active), CrossingPlace()
                 si_lathe.t = si_lathe.t + t0  # along the line, as the walking kinds' t
-            si, walk, take = _nearer(si, walk, si_lathe, place, t0, margin)
+            # (the margin holds against the rest only: between lathes the
+            # nearer crossing wins, else one could be lost for good)
+            si, walk, take = _nearer(si, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
             won |= take
         for group in self.groups:
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
             si_group, place = group.ray_walk(line, ray, active, after)
-            si, walk, take = _nearer(si, walk, si_group, place, t0, margin)
+            si, walk, take = _nearer(si, walk, si_group, place, t0, dr.select(won, 0.0, margin))
             won |= take
         return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
 
