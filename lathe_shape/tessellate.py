@@ -151,14 +151,15 @@ def rings_for_chain(
     """Rings (one per distinct (vertex, normal, v), numbered in order of
     first use: each segment's start, then its end) and bands per segment."""
     m = len(segments)
-    # Keys of the 2m segment ends, interleaved (start of s, end of s); + 0.0
-    # makes -0.0 equal to 0.0 bit for bit (rows are compared as bytes).
+    # Keys of the 2m segment ends, interleaved (start of s, end of s)
     keys = np.empty((2 * m, 4), dtype=np.float64)
     keys[0::2, 0], keys[1::2, 0] = segments[:, 0], segments[:, 1]
     keys[0::2, 1:3], keys[1::2, 1:3] = normal_start, normal_end
     keys[0::2, 3], keys[1::2, 3] = v_start, v_end
-    keys += 0.0
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    # Equal keys as Python's float comparison has them (-0.0 == 0.0):
+    # + 0.0 makes every zero positive for the comparison; the rings keep
+    # the values of their first use.
+    _, first, inverse = np.unique(keys + 0.0, axis=0, return_index=True, return_inverse=True)
     # np.unique numbers the keys in sorted order: renumber by first use
     order = np.argsort(first)
     rank = np.empty_like(order)

@@ -4,8 +4,10 @@ Rays from outside are followed through every hit (restarting 1e-4 of the
 object's size past each one); a closed solid must be crossed an even number
 of times. Prints the leak count and rate per test curve (a closed periodic
 ring, an open egg, the 12-segment glass) and in total. Then the spawn-ray
-parity walk of ``scripts/leak_test.py`` (restarts from ``si.spawn_ray``,
-exact kernel against Mitsuba's mesh) through the paper's B-spline glass
+parity walk of ``scripts/leak_test.py`` (restarts from ``si.spawn_ray``:
+``lathe_path``'s geometry, which carries the walked line from hit to hit,
+the lathe's own query on the spawned rays alone, and Mitsuba's mesh)
+through the paper's B-spline glass
 (``scenes/paper/glass_bspline.csv``) on a third as many rays. Last, the
 offset-free walk (``next_crossing_bspline``: every query from the ray's
 first origin, for the crossing after the last one) and the one-query count

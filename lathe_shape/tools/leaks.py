@@ -11,8 +11,12 @@ measurements follow rays through all their hits:
 * :func:`spawn_walk` and :func:`scene_parity_leaks` (any lathe, e.g. the
   closed profiles of ``scenes/*.csv``): the same parity count, walked the
   way integrators walk (``si.spawn_ray`` past every hit: the restart is
-  offset along the geometric normal by Mitsuba's ray epsilon), for the exact
-  kernel and for Mitsuba's own mesh of the lathe on the same rays.
+  offset along the geometric normal by Mitsuba's ray epsilon), through
+  ``lathe_path``'s scene geometry (which carries the walked line from hit
+  to hit, see :mod:`lathe_shape.plugin.line_walk`), through the lathe's
+  own query on the spawned rays alone, and through Mitsuba's own mesh of
+  the lathe, on the same rays; :func:`refraction_walk` follows rays that
+  refract at every hit instead.
 
 Needs an active JIT Mitsuba variant.
 """
