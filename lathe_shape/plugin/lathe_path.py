@@ -174,7 +174,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         beta = mi.Spectrum(1.0)              # Path throughput weight
         eta = mi.Float(1.0)                  # Product of relative IORs (for Russian roulette)
         active = mi.Bool(active) & (self.max_depth > 0)  # Lanes whose path is still going
-        si_prev = dr.zeros(mi.SurfaceInteraction3f)  # Previous vertex (for MIS)
+        si_prev = dr.zeros(mi.Interaction3f)  # Previous vertex (for MIS; no more than MIS needs)
         bsdf_pdf_prev = mi.Float(1.0)        # BSDF pdf of the direction that led here
         bsdf_delta_prev = mi.Bool(True)      # ... and whether it was a Dirac delta
         valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
@@ -266,7 +266,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             ray = si.spawn_ray(wo_world)
             beta *= bsdf_weight
             eta *= bs.eta
-            si_prev = si
+            si_prev = mi.Interaction3f(si)
             bsdf_pdf_prev = bs.pdf
             bsdf_delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
             depth += 1
