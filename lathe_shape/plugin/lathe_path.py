@@ -235,13 +235,17 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 active_em &= side_geo * side_sh > 0.0
             occluded = geometry.ray_test(si.spawn_ray_to(ds.p), active_em)
             active_em &= ~occluded
+
+            # --- One BSDF call: the light direction's value and pdf, and
+            # the sampled direction (as Mitsuba's path: one dispatch) ---
             wo_em = si.to_local(ds.d)
-            bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(bsdf_ctx, si, wo_em, active_em)
+            sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
+            bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
+                bsdf_ctx, si, wo_em, sample_1, sample_2, active_next)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf_em))
             L += dr.select(active_em, beta * mis_em * bsdf_val_em * em_weight, 0.0)
 
             # ----------------------- BSDF sampling -----------------------
-            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
             wo_world = si.to_world(bs.wo)
 
             # --- Eq. 11, outgoing side: R must stay on the incident side of
