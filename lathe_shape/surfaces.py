@@ -7,8 +7,8 @@ needs from one profile kind, without any plugin code (so a native
 * ``tessellate(steps)`` -- the reference mesh (local frame);
 * ``intersect(o, d, tmax, active)`` / ``occluded(...)`` -- the exact kernel
   on local-frame rays, returning ``(t, seg, u, valid)`` hits;
-* ``next_crossing(...)`` -- where ``walks``, the kernel that walks a ray
-  through its crossings from one origin, each found once (no offsets);
+* ``next_crossing(...)`` -- the kernel that walks a ray through its
+  crossings from one origin, each found once (no offsets);
 * ``geometry(p, seg, u)`` -- geometric and shading normals, uv, dp_du, dp_dv.
 
 :class:`PolylineSurface` is the paper's Method 1 (cone frustums, annuli,
@@ -79,10 +79,6 @@ class Surface(Protocol):
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         """Whether local-frame rays hit the surface at some ``0 < t < tmax``."""
 
-    @property
-    def walks(self) -> bool:
-        """Whether the kind has an offset-free walk (:meth:`next_crossing`)."""
-
     def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
                       after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float
                       ) -> tuple[LatheHit, mi.Float, mi.UInt32]:
@@ -96,8 +92,9 @@ class Surface(Protocol):
 class _KernelSurface:
     """A surface whose exact kernel works on opaque data built on first use.
 
-    Subclasses set ``_intersect`` and ``_occluded`` (the kind's kernels, as
-    ``staticmethod``) and implement ``_build_data``."""
+    Subclasses set ``_intersect``, ``_occluded`` and ``_next_crossing``
+    (the kind's kernels, as ``staticmethod``) and implement
+    ``_build_data``."""
 
     _data = None
 
@@ -116,15 +113,6 @@ class _KernelSurface:
 
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         return self._occluded(self.data, o, d, tmax, active)
-
-    #: The kind's offset-free walk (``next_crossing_polyline``'s contract),
-    #: ``None`` where the kind has none.
-    _next_crossing = None
-
-    @property
-    def walks(self) -> bool:
-        """Whether :meth:`next_crossing` is available for this kind."""
-        return self._next_crossing is not None
 
     def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
                       after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float

@@ -95,7 +95,7 @@ class KindLayout:
     (B-splines). ``scalars``: the per-profile opaque scalars.
     ``intersect``, ``occluded``: the kernels; ``next_crossing``: the
     kernel that walks a ray through its crossings without offsets
-    (``next_crossing_polyline``'s contract; ``None``: the kind has none);
+    (``next_crossing_polyline``'s contract);
     ``geometry(view, p, seg, local_seg, u, smooth)``: the local
     differential geometry."""
 
@@ -108,7 +108,7 @@ class KindLayout:
     intersect: Callable
     occluded: Callable
     geometry: Callable
-    next_crossing: Callable | None = None
+    next_crossing: Callable
 
 
 _FRAME = ("n_nodes", "bound_r", "bound_z_lo", "bound_z_hi", "scale", "inv_scale", "z_shift")
@@ -362,11 +362,9 @@ class LatheSet:
         tmax``) with any lathe of the set after ``after``, the place that a
         previous call with the same ``o``, ``d`` returned (or a place
         without lathe: the first crossing after ``after.t``); and this
-        crossing's place. Needs a kind whose layout has ``next_crossing``.
-        Walking a ray this way finds each crossing once (see
-        ``next_crossing_polyline``)."""
-        hit, place = self._trace(o, d, mi.Float(tmax), mi.Bool(active), False, after)
-        return hit, place
+        crossing's place. Walking a ray this way finds each crossing once
+        (see ``next_crossing_polyline``)."""
+        return self._trace(o, d, mi.Float(tmax), mi.Bool(active), False, after)
 
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         """Whether the world rays hit a lathe of the set at some ``0 < t <

@@ -239,23 +239,17 @@ class ExactSceneGeometry:
         won = mi.Bool(False)  # a lathe is nearer than the rest
         for index, lathe in enumerate(self.single):
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
-            if lathe.surface.walks:
-                mine = after.lathe == index
-                si_lathe, s, key = lathe.next_crossing_exact(
-                    line, active, dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING), t0)
-                place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
-            else:
-                ray_lathe = mi.Ray3f(ray)
-                ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
-                si_lathe, place = lathe.ray_intersect_exact(ray_lathe, active), CrossingPlace()
-                si_lathe.t = si_lathe.t + t0  # along the line, as the walking kinds' t
+            mine = after.lathe == index
+            si_lathe, s, key = lathe.next_crossing_exact(
+                line, active, dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING), t0)
+            place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
             # (the margin holds against the rest only: between lathes the
             # nearer crossing wins, else one could be lost for good)
             si, walk, take = _nearer(si, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
             won |= take
         for group in self.groups:
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
-            si_group, place = group.ray_walk(line, ray, active, after)
+            si_group, place = group.ray_walk(line, active, after)
             si, walk, take = _nearer(si, walk, si_group, place, t0, dr.select(won, 0.0, margin))
             won |= take
         return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
@@ -423,19 +417,12 @@ class LatheGroup:
         self.first = opaque(np.array([first], dtype=np.uint32), mi.UInt32)
         self.count = opaque(np.array([len(self.lathes)], dtype=np.uint32), mi.UInt32)
 
-    def ray_walk(self, line: mi.Ray3f, ray: mi.Ray3f, active: mi.Bool,
+    def ray_walk(self, line: mi.Ray3f, active: mi.Bool,
                  after: CrossingPlace) -> tuple[mi.SurfaceInteraction3f, CrossingPlace]:
         """Nearest crossing with any of the lathes along the walked ``line``
         (before ``line.maxt``) after the place ``after`` (see
         :meth:`ExactSceneGeometry.ray_intersect_walk`; lathes numbered as
-        :meth:`number_from` says), and its place. A kind without a walk
-        queries ``ray`` (``t`` then shifted to the line's, ``t + after.t``)
-        and reports no place."""
-        if self.set.layout.next_crossing is None:
-            tmax = line.maxt - after.t
-            si = self._interaction(ray, self.set.intersect(ray.o, ray.d, tmax, active))
-            si.t = si.t + after.t
-            return si, CrossingPlace()
+        :meth:`number_from` says), and its place."""
         mine = (after.lathe >= self.first) & (after.lathe - self.first < self.count)
         lathe = dr.select(mine, after.lathe - self.first, NO_LATHE)
         local = CrossingPlace(lathe, after.s, after.key, after.t)

@@ -349,7 +349,7 @@ class LatheShape(mi.Mesh):
                             after_key: mi.UInt32, after_t: mi.Float
                             ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32]:
         """Walk the world-space ``line`` through its crossings with the exact
-        lathe, without offsets (kinds whose surface ``walks``): the crossing
+        lathe, without offsets: the crossing
         after the one at ``(after_s, after_key)`` that a previous call with
         the same ``line.o``, ``line.d`` returned, or where ``after_key`` is
         ``NO_CROSSING`` the first one with ``t > after_t``, before

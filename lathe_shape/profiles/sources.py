@@ -113,9 +113,7 @@ def _read_csv_lines(path: str) -> RawPoints:
                 content = decode_utf8(raw, path, number).split("#", 1)[0].strip()
                 if not content:
                     continue
-                fields = [f.strip() for f in content.replace(";", ",").split(",")]
-                if len(fields) == 1:
-                    fields = content.split()
+                fields = _csv_fields(content)
                 if not rows.numbers and _is_header(fields):
                     continue
                 rows.add(fields, number, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
@@ -139,8 +137,7 @@ def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
         match = _ROWS[0].fullmatch(line) or _ROWS[1].fullmatch(line)
         if match is None:
             content = line.split("#", 1)[0].strip()
-            fields = [f.strip() for f in content.replace(";", ",").split(",")]
-            if not content or (not numbers and _is_header(fields if len(fields) > 1 else content.split())):
+            if not content or (not numbers and _is_header(_csv_fields(content))):
                 continue
             return None
         r, z, flag = match.groups()
@@ -269,6 +266,13 @@ class _Rows:
         points = np.frombuffer(self.coordinates, dtype=np.float64).reshape(-1, 2).copy()
         sharp = np.frombuffer(bytes(self.sharp), dtype=np.uint8).astype(bool)
         return points, sharp, PointLabels(self.prefix, np.frombuffer(self.numbers, np.int64), self.word)
+
+
+def _csv_fields(content: str) -> list[str]:
+    """The fields of a CSV line's content (comment removed): separated by
+    commas or semicolons, else by white space."""
+    fields = [f.strip() for f in content.replace(";", ",").split(",")]
+    return fields if len(fields) > 1 else content.split()
 
 
 def _is_header(fields: list[str]) -> bool:
