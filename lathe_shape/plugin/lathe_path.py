@@ -255,14 +255,16 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 side = cos_in_geo * dr.dot(si.n, wo_world)
                 bad_out = active_next & (bs.pdf > 0.0) & dr.select(reflected, side <= 0.0, side >= 0.0)
                 if dr.hint(check == "fallback", mode="scalar"):
-                    # Redo this vertex's sampling with the geometric normal.
-                    si_geo = with_geometric_frame(si, bad_out)
-                    bs_geo, weight_geo = bsdf.sample(
-                        bsdf_ctx, si_geo, sampler.next_1d(), sampler.next_2d(), bad_out
-                    )
-                    bs = dr.select(bad_out, bs_geo, bs)
-                    bsdf_weight = dr.select(bad_out, weight_geo, bsdf_weight)
-                    wo_world = dr.select(bad_out, si_geo.to_world(bs_geo.wo), wo_world)
+                    # Redo this vertex's sampling with the geometric normal,
+                    # in a symbolic if: packets without a contradicting
+                    # vertex (nearly all) skip the second BSDF call.
+                    redo_1, redo_2 = sampler.next_1d(), sampler.next_2d()
+                    if bad_out:
+                        si_geo = with_geometric_frame(si, bad_out)
+                        bs_geo, weight_geo = bsdf.sample(bsdf_ctx, si_geo, redo_1, redo_2, bad_out)
+                        bs = dr.select(bad_out, bs_geo, bs)
+                        bsdf_weight = dr.select(bad_out, weight_geo, bsdf_weight)
+                        wo_world = dr.select(bad_out, si_geo.to_world(bs_geo.wo), wo_world)
                 else:
                     active_next &= ~bad_out
 
