@@ -91,6 +91,13 @@ def parse_aovs(text: str, who: str = "lathe_path") -> tuple[str, ...]:
     return names
 
 
+def guide_channels(aovs: tuple[str, ...], albedo: mi.Spectrum, normal: mi.Vector3f) -> list[mi.Float]:
+    """The AOV channels of the guides ``aovs`` (none without guides: the
+    albedo is then not read, so it may be any spectrum)."""
+    guides = {"albedo": lambda: [albedo.x, albedo.y, albedo.z], "nn": lambda: [normal.x, normal.y, normal.z]}
+    return [channel for name in aovs for channel in guides[name]()]
+
+
 def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
     """Power-heuristic MIS weight of strategy a against b."""
     a2, b2 = dr.square(pdf_a), dr.square(pdf_b)
@@ -133,6 +140,11 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             )
         #: The guide images rendered as AOVs (see ``aovs``).
         self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who))
+        if self.aovs and not mi.is_rgb:
+            raise ValueError(
+                f"lathe_path: parameter 'aovs' needs an RGB variant (the guides are RGB images); "
+                f"this is '{mi.variant()}'"
+            )
         self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
         self._geometry = None
 
@@ -286,8 +298,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
             active = active_next
 
-        guides = {"albedo": [albedo.x, albedo.y, albedo.z], "nn": [normal.x, normal.y, normal.z]}
-        return L, valid_ray, [channel for name in self.aovs for channel in guides[name]]
+        return L, valid_ray, guide_channels(self.aovs, albedo, normal)
 
     def aov_names(self) -> list[str]:
         return [channel for name in self.aovs for channel in AOV_CHANNELS[name]]
@@ -303,4 +314,5 @@ class LathePathIntegrator(mi.SamplingIntegrator):
 
 def register() -> None:
     """Register ``<integrator type="lathe_path">`` for the active variant."""
-    register_jit_plugin(mi.register_integrator, "lathe_path", LathePathIntegrator, lambda props: "lathe_path")
+    register_jit_plugin(mi.register_integrator, "lathe_path", LathePathIntegrator, lambda props: "lathe_path",
+                        polarized=False)

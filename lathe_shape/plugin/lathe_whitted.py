@@ -355,4 +355,4 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
 def register() -> None:
     """Register ``<integrator type="lathe_whitted">`` for the active variant."""
     register_jit_plugin(mi.register_integrator, "lathe_whitted", LatheWhittedIntegrator,
-                        lambda props: "lathe_whitted")
+                        lambda props: "lathe_whitted", polarized=False)

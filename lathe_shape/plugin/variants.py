@@ -4,6 +4,7 @@ run them, and LLVM variants need a libLLVM that Dr.Jit can use."""
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable
 
 import drjit as dr
@@ -17,21 +18,54 @@ def register_jit_plugin(
     name: str,
     factory: Callable[[mi.Properties], object],
     describe: Callable[[mi.Properties], str],
+    polarized: bool = True,
 ) -> None:
-    """``register(name, factory)`` on a JIT variant; on any other variant
+    """``register(name, factory)`` on a JIT variant (and, unless
+    ``polarized`` is false, also on a polarized one); on any other variant
     register a constructor that fails with a message naming the plugin
     (``describe(props)``) and the variants that work."""
-    if dr.is_jit_v(mi.Float):
+    jit = dr.is_jit_v(mi.Float)
+    defined_for = _defined_for(factory)
+    if jit and defined_for is None and (polarized or not mi.is_polarized):
         register(name, factory)
         return
+    if jit and defined_for is not None:
+        why = (f"lathe_shape was imported under the variant '{defined_for}', and its plugin "
+               "classes derive from that variant's Mitsuba classes; select the variant before "
+               "importing lathe_shape (switching between JIT variants in one process is not supported)")
+    elif jit:
+        why = ("this integrator does not carry polarization (Mueller matrices); use an "
+               "unpolarized variant such as 'llvm_ad_rgb' or 'llvm_ad_spectral', or the "
+               "'lathe_prb' integrator")
+    else:
+        why = "lathe_shape needs a JIT variant such as 'llvm_ad_rgb' or 'cuda_ad_rgb'"
 
     def unsupported(props: mi.Properties) -> object:
-        raise RuntimeError(
-            f"{describe(props)}: Mitsuba variant '{mi.variant()}' is not supported; "
-            "lathe_shape needs a JIT variant such as 'llvm_ad_rgb' or 'cuda_ad_rgb'"
-        )
+        raise RuntimeError(f"{describe(props)}: Mitsuba variant '{mi.variant()}' is not supported: {why}")
 
     register(name, unsupported)
+
+
+def _defined_for(factory: Callable) -> str | None:
+    """None if ``factory`` (a plugin class, or any callable) suits the
+    active variant; else the variant its Mitsuba base class belongs to
+    (Python classes are bound to the variant active when their module was
+    imported)."""
+    for base in getattr(factory, "__mro__", ())[1:]:
+        if base.__module__ == "mitsuba" and hasattr(mi, base.__name__):
+            if getattr(mi, base.__name__) is base:
+                return None
+            return _variant_of(base) or "another variant"
+    return None
+
+
+def _variant_of(cls: type) -> str | None:
+    """The Mitsuba variant whose module defines the class ``cls``."""
+    for variant in mi.variants():
+        module = sys.modules.get(f"mitsuba.{variant}")
+        if module is not None and getattr(module, cls.__name__, None) is cls:
+            return variant
+    return None
 
 
 #: Lowest LLVM measured to work with Dr.Jit 1.5 here: libLLVM 14 is refused by
