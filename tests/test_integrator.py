@@ -268,3 +268,44 @@ def test_instanced_lathe_is_refused_clearly():
     assert "lathe 'g' is inside a <shapegroup>; instanced lathes" in root_message(info.value)
     # Stock integrators still render the instanced reference mesh.
     assert np.isfinite(mi.render(scene, integrator=mi.load_dict({"type": "path"})).numpy()).all()
+
+
+def _hidden_emitters_scene(integrator: str) -> mi.Scene:
+    """A glass lathe and a null-BSDF sphere under a sky, a diffuse wall, and
+    an emitting panel in front of the wall's centre; rgba film."""
+    transform = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "scene", "integrator": {"type": integrator, "max_depth": 6, "hide_emitters": True},
+        "sensor": {"type": "perspective", "fov": 35,
+                   "to_world": transform().look_at([0, -6, 1.5], [0, 0, 1], [0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "pixel_format": "rgba",
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 32}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.5}},
+        "wall": {"type": "rectangle", "bsdf": {"type": "diffuse"},
+                 "to_world": transform().translate([0, 3, 0]).rotate([1, 0, 0], 90).scale(2)},
+        "panel": {"type": "rectangle",
+                  "to_world": transform().translate([0, -2, 1]).rotate([1, 0, 0], 90).scale(0.4),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 5}}},
+        "ghost": {"type": "sphere", "center": [-1.8, 0, 0.5], "radius": 0.6, "bsdf": {"type": "null"}},
+        "glass": {"type": "lathe", "profile": "0 0, 1 0, 1.2 1, 0.6 2, 0 2",
+                  "to_world": transform().translate([1.6, 0, 0]), "bsdf": {"type": "dielectric"}},
+    })
+
+
+@pytest.mark.parametrize("integrator", ["lathe_path", "lathe_prb"])
+def test_hide_emitters_as_stock(integrator):
+    """hide_emitters as Mitsuba 3.9's path and prb: the sky is black and
+    transparent (also through the null sphere), and the area panel seen
+    directly is skipped: the wall behind it shows, lit by the panel."""
+    stock = "path" if integrator == "lathe_path" else "prb"
+    exact = mi.render(_hidden_emitters_scene(integrator), seed=1).numpy()
+    mesh = mi.render(_hidden_emitters_scene(stock), seed=1).numpy()
+    panel = (slice(10, 14), slice(10, 14))
+    assert exact[panel][..., :3].mean() > 0.05          # the lit wall, not a black panel
+    assert abs(exact[panel][..., :3].mean() / mesh[panel][..., :3].mean() - 1) < 0.05
+    assert abs(exact[..., 3].mean() - mesh[..., 3].mean()) < 0.01   # alpha: sky transparent
+    assert 0.1 < mesh[..., 3].mean() < 0.9
+    sky = mesh[..., 3] == 0
+    assert sky.sum() > 20 and np.abs(exact[sky][..., :3]).max() == 0.0
+    assert np.abs(exact[..., :3] - mesh[..., :3]).mean() < 0.05 * mesh[..., :3].mean()

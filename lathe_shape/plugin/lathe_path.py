@@ -15,7 +15,10 @@
      - Path depth from which Russian roulette may stop paths. (Default: 5)
    * - ``hide_emitters``
      - boolean
-     - Hide directly visible emitters. (Default: false)
+     - Hide directly visible emitters, as Mitsuba's ``path`` does: a camera
+       ray goes on through the area emitters it meets first, and the
+       environment seen directly (or only through ``null`` surfaces) is
+       black with alpha 0. (Default: false)
    * - ``normal_check``
      - string
      - What to do where the interpolated shading normal contradicts the real
@@ -189,24 +192,26 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         si_prev = dr.zeros(mi.Interaction3f)  # Previous vertex (for MIS; no more than MIS needs)
         bsdf_pdf_prev = mi.Float(1.0)        # BSDF pdf of the direction that led here
         bsdf_delta_prev = mi.Bool(True)      # ... and whether it was a Dirac delta
-        valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
+        # Alpha: the path met a surface (not only null ones) or a visible environment
+        valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
         want_guides = len(self.aovs) > 0
         through_delta = self.aov_through_delta
         albedo = mi.Spectrum(0.0)            # Albedo guide (AOV)
         normal = mi.Vector3f(0.0)            # Normal guide (AOV)
         guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
 
+        if dr.hint(self.hide_emitters, mode="scalar"):
+            ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
+
         while dr.hint(active, max_iterations=-1, label="lathe_path"):
             si, walk = geometry.ray_intersect_walk(ray, active, walk)
             valid = si.is_valid()
-            valid_ray |= active & valid & (depth == 0)
 
             # ---------------- Direct emission (BSDF-sampled) ----------------
             ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
-            show = active & (depth > 0) if self.hide_emitters else active
-            emitted = ds.emitter.eval(si, show)
+            emitted = ds.emitter.eval(si, active)
             L += beta * mis_bsdf * emitted
 
             active_next = active & valid & (depth + 1 < self.max_depth)
@@ -281,6 +286,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                     active_next &= ~bad_out
 
             # ------------------ Update the loop state ------------------
+            valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
             ray = si.spawn_ray(wo_world)
             beta *= bsdf_weight
             eta *= bs.eta
@@ -298,7 +304,8 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
             active = active_next
 
-        return L, valid_ray, guide_channels(self.aovs, albedo, normal)
+        # A hidden environment seen directly, or only through null surfaces, is black
+        return dr.select(valid_ray, L, 0.0), valid_ray, guide_channels(self.aovs, albedo, normal)
 
     def aov_names(self) -> list[str]:
         return [channel for name in self.aovs for channel in AOV_CHANNELS[name]]

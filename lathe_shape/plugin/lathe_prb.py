@@ -200,12 +200,15 @@ class LathePRBIntegrator(RBIntegrator):
         β = mi.Spectrum(1)                        # Path throughput weight
         η = mi.Float(1)                           # Product of relative IORs (Russian roulette)
         active = mi.Bool(active)                  # Lanes whose path is still going
+        if dr.hint(self.hide_emitters, mode="scalar"):
+            ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's prb
         si = geometry.ray_intersect(ray, active)  # Current (detached) interaction
         ray_prev = mi.Ray3f(ray)                  # Ray that found the previous vertex ...
         si_prev = dr.zeros(mi.SurfaceInteraction3f)  # ... and that vertex (detached)
         bsdf_pdf_prev = mi.Float(1.0)             # BSDF pdf of the direction that led here
         bsdf_delta_prev = mi.Bool(True)           # ... and whether it was a Dirac delta
-        valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
+        # Alpha: the camera ray met a surface, or a visible environment
+        valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
 
         while dr.hint(active, max_iterations=self.max_depth, label=f"lathe_prb ({mode.name})"):
             valid_ray |= active & si.is_valid() & (depth == 0)

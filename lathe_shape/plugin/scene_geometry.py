@@ -272,6 +272,22 @@ class ExactSceneGeometry:
             return pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
         return rest_interaction(self.direct, ray, pi, active)
 
+    @dr.syntax
+    def skip_area_emitters(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Ray3f:
+        """``ray`` (a camera ray) moved past the area emitters it meets
+        first, for ``hide_emitters`` as Mitsuba's ``path`` does: where its
+        first hit is on a shape with an area emitter, it starts again just
+        past that hit, until it first meets a shape without one (or
+        nothing)."""
+        ray = mi.Ray3f(ray)
+        si = self.ray_intersect(ray, active)
+        skip = active & si.is_valid() & (si.shape.emitter() != None)  # noqa: E711 (Dr.Jit's test)
+        while skip:
+            ray[skip] = si.spawn_ray(ray.d)
+            si = self.ray_intersect(ray, skip)
+            skip &= si.is_valid() & (si.shape.emitter() != None)  # noqa: E711
+        return ray
+
     def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
         """Is anything hit along ``ray`` before ``ray.maxt``?"""
         self.follow_moves()
