@@ -309,3 +309,27 @@ def test_hide_emitters_as_stock(integrator):
     sky = mesh[..., 3] == 0
     assert sky.sum() > 20 and np.abs(exact[sky][..., :3]).max() == 0.0
     assert np.abs(exact[..., :3] - mesh[..., :3]).mean() < 0.05 * mesh[..., :3].mean()
+
+
+@pytest.mark.parametrize("integrator", ["lathe_path", "lathe_whitted"])
+def test_emitting_lathe_lights_as_its_mesh(integrator):
+    """A coarse emitting lathe (a 12-step cylinder lamp) lights the floor
+    as with stock path: Mitsuba samples the lamp's points on its mesh, so
+    the lamp is traced as that mesh (its exact surface would shadow them)."""
+    transform = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": transform().look_at([0, -8, 4], [0, 0, 0.5], [0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 64}},
+        "floor": {"type": "rectangle", "to_world": transform().scale([5, 5, 1]), "bsdf": {"type": "diffuse"}},
+        "lamp": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 2, 0 2", "mesh_segments": 12,
+                 "to_world": transform().translate([0, 0, 0.2]),
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [1, 1, 1]}}},
+    })
+    exact = mi.render(scene, seed=1, integrator=mi.load_dict({"type": integrator, "max_depth": 3})).numpy()
+    mesh = mi.render(scene, seed=1, integrator=mi.load_dict({"type": "path", "max_depth": 3})).numpy()
+    floor = (slice(24, 32), slice(None))
+    assert mesh[floor].mean() > 0.002
+    assert abs(exact[floor].mean() / mesh[floor].mean() - 1) < 0.05

@@ -75,8 +75,8 @@ class ExactSceneGeometry:
         self.fingerprint = self.scene_fingerprint(scene)
         self.bounds = self.rest_bounds(scene)
         shapes = scene.shapes()
-        self.lathes: list[LatheShape] = scene_lathes(scene)
-        others = [s for s in shapes if not isinstance(s, LatheShape)]
+        self.lathes: list[LatheShape] = [s for s in scene_lathes(scene) if _exact(s)]
+        others = [s for s in shapes if not _exact(s)]
         by_kind: dict[object, list[LatheShape]] = {}
         for lathe in self.lathes:
             # Kinds of one kernel layout (the B-spline kernel's cubic kinds)
@@ -130,12 +130,13 @@ class ExactSceneGeometry:
     def scene_fingerprint(scene: mi.Scene) -> tuple:
         """Identity of every shape (lathes apart): changes when the scene is
         another one or its shapes are others."""
-        return tuple((shape.ptr, isinstance(shape, LatheShape)) for shape in scene.shapes())
+        return tuple((shape.ptr, _exact(shape)) for shape in scene.shapes())
 
     @staticmethod
     def rest_bounds(scene: mi.Scene) -> tuple:
-        """Bounds of the non-lathe shapes: change when one is moved or edited."""
-        boxes = (shape.bbox() for shape in scene.shapes() if not isinstance(shape, LatheShape))
+        """Bounds of the shapes traced by Mitsuba (all but the exact
+        lathes): change when one is moved or edited."""
+        boxes = (shape.bbox() for shape in scene.shapes() if not _exact(shape))
         return tuple((tuple(box.min), tuple(box.max)) for box in boxes)
 
     def matches(self, scene: mi.Scene) -> bool:
@@ -297,6 +298,15 @@ class ExactSceneGeometry:
         for group in self.groups:
             occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
+
+
+def _exact(shape: mi.Shape) -> bool:
+    """Whether ``shape`` is a lathe intersected exactly: every lathe but an
+    emitting one. Mitsuba samples an area emitter's points on its mesh, which
+    lies inside the exact surface where the profile is convex: an exact lathe
+    would shadow its own light. So an emitting lathe is traced as its
+    reference mesh, as stock integrators trace it."""
+    return isinstance(shape, LatheShape) and shape.emitter() is None
 
 
 def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,

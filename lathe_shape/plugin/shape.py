@@ -65,7 +65,9 @@
      - Flip the surface orientation, as for any Mitsuba shape.
 
 Nested ``<bsdf>`` and ``<emitter>`` work as for any shape (``lathe_path``
-does not handle participating media).
+does not handle participating media). An emitting lathe is traced as its
+reference mesh by this package's integrators too, since Mitsuba samples
+the emitter's points on that mesh; give it a fine ``mesh_segments``.
 
 The plugin is a :class:`mitsuba.Mesh` holding the reference tessellation, so
 stock integrators (``path``, ``volpath``, ...) render it as a smooth-shaded
