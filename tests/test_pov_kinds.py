@@ -283,11 +283,15 @@ def test_dielectric_on_open_sheet_warns():
     try:
         _lathe("bezier_cup", bsdf={"type": "dielectric"})
         _lathe("bezier_cup", bsdf={"type": "thindielectric"})
+        _lathe("bezier_cup", bsdf={"type": "twosided", "bsdf": {"type": "diffuse"}})
+        _lathe("bezier_cup", bsdf={"type": "conductor"})
     finally:
         logger.remove_appender(appender)
         logger.set_error_level(old)
     warnings = [t for t in logged if "open profile" in t]
-    assert len(warnings) == 1 and "thindielectric" in warnings[0]
+    assert len(warnings) == 2 and "thindielectric" in warnings[0]
+    assert "a one-sided SmoothConductor BSDF on an open profile" in warnings[1]
+    assert "wrap the BSDF in a 'twosided' one" in warnings[1]
 
 
 def test_profile_error_class():

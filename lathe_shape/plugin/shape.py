@@ -35,8 +35,10 @@
      - The profile is a single open sheet, not the outline of a solid
        (default: false, or the CSV's ``# open: true``): its ends need not
        meet or lie on the axis, and it has no inside. A ``sor`` drops its
-       end discs. Use BSDFs that need no inside (``thindielectric``,
-       ``conductor``, ``twosided`` ...); a ``dielectric`` logs a warning.
+       end discs. Use BSDFs that need no inside and work on both sides
+       (``thindielectric``, or any BSDF inside a ``twosided``); a
+       ``dielectric`` or a one-sided BSDF (``diffuse``, ``conductor`` ...)
+       logs a warning.
    * - ``crease_angle``
      - float
      - Corners of the profile turning by more than this many degrees keep a
@@ -220,6 +222,10 @@ class LatheShape(mi.Mesh):
                    f"{who}: a {name} BSDF on an open profile (a single sheet, no inside): rays "
                    f"refract into a solid that is not there; use 'thindielectric' for a thin "
                    f"glass sheet, or close the profile")
+        elif bsdf is not None and not mi.has_flag(bsdf.flags(), mi.BSDFFlags.BackSide):
+            mi.Log(mi.LogLevel.Warn,
+                   f"{who}: a one-sided {name} BSDF on an open profile (a single sheet): its "
+                   f"inner side renders black; wrap the BSDF in a 'twosided' one")
 
     def _set_transform(self, matrix: np.ndarray) -> None:
         self.to_world_matrix = np.array(matrix, dtype=np.float64)
