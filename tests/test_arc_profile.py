@@ -184,3 +184,18 @@ def test_scene_specs_build_the_scene_profiles(name):
     stored, stored_sharp, _ = read_points(ROOT / "scenes" / f"{name}.csv")
     assert built.shape == stored.shape and np.array_equal(built_sharp, stored_sharp)
     assert np.abs(built - stored).max() <= 5e-7 + 1e-12
+
+
+def test_readme_spec_example_is_a_valid_profile():
+    """The arc-profile spec shown in the README builds a valid closed
+    profile (a user copies it)."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    blocks = [b for b in re.findall(r"```json\n(.*?)```", readme, re.S) if '"base"' in b]
+    assert blocks
+    for block in blocks:
+        points, sharp = build_from_spec(json.loads(block))
+        profile = make_profile(points, sharp, source="README spec")
+        assert profile.segment_count > 40
