@@ -265,3 +265,25 @@ def test_scenes_of_many_lathes_load(tmp_path):
     scene_file.write_text(f'<scene version="3.0.0">{lathes}</scene>')
     assert len(scene_lathes(load_scene(scene_file))) == count
 
+
+
+def test_mesh_buffer_edits_are_refused():
+    """Editing the reference mesh through mi.traverse would move the mesh
+    but not the exact lathe: refused, and the mesh is put back."""
+    scene = mi.load_dict({"type": "scene", "a": {
+        "type": "lathe", "profile": "0 0, 1 0, 1.2 1, 0.6 2, 0 2",
+        "to_world": mi.ScalarTransform4f().translate([-1.5, 0, 0])}})
+    params = mi.traverse(scene)
+    before = np.array(params["a.vertex_positions"])
+    params["a.vertex_positions"] = params["a.vertex_positions"] + 3.0
+    with pytest.raises(ValueError, match=re.escape(
+            "lathe 'a': parameter 'vertex_positions' is the lathe's reference mesh, made from its profile "
+            "and transform, and cannot be edited: move the lathe with LatheShape.set_to_world(matrix, "
+            "scene), or change its profile through its 'points' parameter")):
+        params.update()
+    lathe = scene.shapes()[0]
+    assert np.array_equal(np.array(mi.traverse(lathe)["vertex_positions"]), before)
+    # The lathe's own ways still work.
+    lathe.set_to_world(mi.ScalarTransform4f().translate([1.5, 0, 0]), scene)
+    moved = np.array(mi.traverse(lathe)["vertex_positions"]).reshape(-1, 3)
+    assert abs(moved[:, 0].mean() - 1.5) < 0.05

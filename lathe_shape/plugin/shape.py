@@ -98,6 +98,10 @@ from .variants import register_jit_plugin
 
 __all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
 
+#: Mitsuba's mesh parameters that hold the reference mesh (written only by
+#: the lathe itself).
+MESH_BUFFERS = ("vertex_positions", "vertex_normals", "vertex_texcoords", "faces")
+
 #: Face attribute of the reference mesh: the profile band (the profile
 #: segment for polylines) that each triangle sweeps.
 FACE_BAND_ATTRIBUTE = "face_lathe_band"
@@ -199,11 +203,7 @@ class LatheShape(mi.Mesh):
         super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
                          len(self.local_mesh.faces), props, has_vertex_normals=True,
                          has_vertex_texcoords=True)
-        params = mi.traverse(self)
-        for key, value in self._mesh_buffers(self.to_world_matrix).items():
-            # The buffer types differ between JIT and scalar variants.
-            params[key] = type(params[key])(value.ravel())
-        params.update()
+        self._write_mesh(self._mesh_buffers(self.to_world_matrix))
         # A mesh attribute makes Mitsuba's scene optimizer (the default
         # optimize=True of mi.load_file, and mi.load_dict with a shared BSDF)
         # leave this mesh alone: it merges only meshes without attributes, and
@@ -278,7 +278,11 @@ class LatheShape(mi.Mesh):
             if not keys:
                 raise ValueError(f"lathe '{self.id()}' is not part of the given scene")
             params[keys[0]] = type(params[keys[0]])(buffers[name].ravel())
-        params.update()
+        self._writing_mesh = True
+        try:
+            params.update()
+        finally:
+            self._writing_mesh = False
         self._set_transform(matrix)
 
     # -- the profile as a differentiable parameter ---------------------------
@@ -297,6 +301,17 @@ class LatheShape(mi.Mesh):
         """A new ``points`` value re-validates the profile and rebuilds the
         kernel data and the reference mesh; an invalid one raises the loading
         error and leaves the previous profile (and parameter value) in place."""
+        edited = [key for key in keys if key in MESH_BUFFERS]
+        if edited and not getattr(self, "_writing_mesh", False):
+            # Edited from outside (mi.traverse): put the mesh back, refuse.
+            self._write_mesh(self._mesh_buffers(self.to_world_matrix))
+            who = f"lathe '{self.id()}'" if self.id() else "lathe"
+            raise ValueError(
+                f"{who}: parameter '{edited[0]}' is the lathe's reference mesh, made from its "
+                "profile and transform, and cannot be edited: move the lathe with "
+                "LatheShape.set_to_world(matrix, scene), or change its profile through its "
+                "'points' parameter"
+            )
         if "points" in keys:
             self._update_profile()
         rest = [key for key in keys if key != "points"]
@@ -318,11 +333,21 @@ class LatheShape(mi.Mesh):
         self.profile = surface.profile
         self._index = None
         self.local_mesh = surface.tessellate(self.mesh_segments)
+        self._write_mesh({**self._mesh_buffers(self.to_world_matrix),
+                          FACE_BAND_ATTRIBUTE: self.local_mesh.face_band.astype(np.float32)})
+
+    def _write_mesh(self, buffers: dict[str, np.ndarray]) -> None:
+        """Write the reference mesh's buffers (the only writer allowed: see
+        :meth:`parameters_changed`)."""
         params = mi.traverse(self)
-        for key, value in self._mesh_buffers(self.to_world_matrix).items():
+        for key, value in buffers.items():
+            # The buffer types differ between JIT and scalar variants.
             params[key] = type(params[key])(value.ravel())
-        params[FACE_BAND_ATTRIBUTE] = mi.Float(self.local_mesh.face_band.astype(np.float32))
-        params.update()
+        self._writing_mesh = True
+        try:
+            params.update()
+        finally:
+            self._writing_mesh = False
 
     @property
     def profile_index(self) -> ProfileIndex:
