@@ -65,19 +65,22 @@ def remember_input(surface: PolylineSurface | BSplineSurface, points, sharp, lab
     return surface
 
 
-def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray) -> PolylineSurface | BSplineSurface:
+def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray,
+                    who: str = "lathe: parameter 'points'") -> PolylineSurface | BSplineSurface:
     """Validate new point coordinates (flat ``r, z`` pairs, the user's order)
     as the profile ``given`` describes and build its surface; raises
-    :class:`ProfileError` with the same messages as loading."""
+    :class:`ProfileError` with the messages of loading, naming ``who`` (the
+    parameter) and the points by their number in it (``point 1`` first)."""
     flat = np.asarray(values, dtype=np.float64).ravel()
     if flat.size != given.points.size:
         raise ProfileError(
-            f"{given.source}: parameter 'points' needs {given.points.size} values "
+            f"{who} needs {given.points.size} values "
             f"({len(given.points)} (r, z) pairs, as loaded), got {flat.size}"
         )
     points = flat.reshape(-1, 2)
-    surface = make_surface(given.kind, points, given.sharp, given.labels, given.source,
-                           given.crease_angle, given.smooth, given.open_sheet)
+    labels = [f"{who}, point {k + 1}" for k in range(len(points))]
+    surface = make_surface(given.kind, points, given.sharp, labels, who, given.crease_angle,
+                           given.smooth, given.open_sheet)
     return remember_input(surface, points, given.sharp, given.labels, given.source,
                           given.crease_angle, given.smooth, given.open_sheet)
 

@@ -322,7 +322,7 @@ class LatheShape(mi.Mesh):
         who = (f"lathe '{self.id()}'" if self.id() else "lathe") + ": parameter 'points'"
         given = self.surface.given
         try:
-            surface = rebuild_surface(given, self.profile_points.numpy())
+            surface = rebuild_surface(given, self.profile_points.numpy(), who)
             check_mesh_budget(_ring_bound(surface), self.mesh_segments, who)
         except ValueError:
             # Keep the previous profile: its value goes back into the parameter.
