@@ -120,10 +120,12 @@ class ExactSceneGeometry:
         for key in params.keys():
             node = params.properties[key][2]
             if isinstance(node, LatheShape) and node.ptr not in direct:
+                name = f"lathe '{node.id()}'" if node.id() else f"a lathe ({key.rsplit('.', 1)[0]})"
                 raise RuntimeError(
-                    f"lathe_path: lathe '{node.id()}' is inside a <shapegroup>; instanced lathes "
-                    "cannot be intersected exactly. Place it in the scene directly (several "
-                    "lathes with their own to_world), or render the scene with a stock integrator."
+                    f"{name} is inside a <shapegroup>; the exact integrators (lathe_path, "
+                    "lathe_whitted, lathe_prb) cannot intersect instanced lathes. Place it in the "
+                    "scene directly (several lathes with their own to_world), or render the scene "
+                    "with a stock integrator."
                 )
 
     @staticmethod
