@@ -87,8 +87,8 @@ def test_orientation():
 @pytest.mark.parametrize("points, message", [
     ([[0, 0], [1, 1]], "needs at least 3 control points"),
     ([[1, 0], [2, 0], [1, 0]], "at least 3 distinct control points"),
-    ([[0, 0], [np.nan, 1], [0, 2]], "control point 1 is not finite"),
-    ([[0, 0], [np.inf, 1], [0, 2]], "control point 1 is not finite"),
+    ([[0, 0], [np.nan, 1], [0, 2]], "control point 2 is not finite"),
+    ([[0, 0], [np.inf, 1], [0, 2]], "control point 2 is not finite"),
     ([[0.1, 0], [1, 1], [0, 2]], "must start and end on the axis"),
     ([[0, 0], [1, 0], [-1, 1], [0, 2]], "crosses the axis (r < 0)"),
     ([[0, 0], [1, 0], [0.2, 1], [1, 1.2], [1, 0.3], [0, 2]], "intersects itself"),

@@ -209,14 +209,17 @@ def test_open_sheet_is_hit_once_per_crossing(name):
 @pytest.mark.parametrize("kind, text, message", [
     ("bezier", "0 0, 1 0, 1 1", "needs at least 4 control points"),
     ("bezier", "0 0, 1 0, 1 1, 0 1, 0 1", "a multiple of 4"),
-    ("bezier", "0 0, 1 0, 1 1, 0.5 1, 0.6 1, 1 2, 1 3, 0 3", "bezier segment 1 starts at [0.6, 1.0]"),
+    ("bezier", "0 0, 1 0, 1 1, 0.5 1, 0.6 1, 1 2, 1 3, 0 3",
+     "bezier segment 2 starts at [0.6, 1.0] (control point 5) but segment 1 ends at [0.5, 1.0] "
+     "(control point 4)"),
     ("catmull_rom", "0 0, 1 0, 1 1", "needs at least 4 control points"),
     ("catmull_rom", "0 0, 0 0, 1 0, 1 1, 1.2 2", "catmull_rom curve is not closed"),
     ("quadratic", "0 -1, 0 0, 1 0, -1 1, 0 2", "crosses the axis"),
     ("sor", "0 0, 1 1, 1 2", "a sor needs at least 4 points"),
-    ("sor", "0 0, 1 1, 1 1, 1 2", "sor point 2 (h = 1) is not above point 1"),
-    ("sor", "0 0, 1 1, -1 2, 1 3", "sor point 2 has a negative radius"),
-    ("sor", "0 0, 1 0, 1 2, 1 0", "the slope at point 2 is undefined"),
+    ("sor", "0 0, 1 1, 1 1, 1 2", "sor point 3 (h = 1) is not above point 2"),
+    ("sor", "0 0, 1 1, -1 2, 1 3", "sor point 3 has a negative radius"),
+    ("sor", "0 0, 1 0, 1 2, 1 0",
+     "sor points 2 and 4 have the same height h = 0: the slope at point 3 is undefined"),
     ("sor", "1.2 0, 0.1 1, 0.4 2, 1.3 3, 1.1 4", "sor radius is imaginary"),
     ("bspline", "0 0, 1 0, 1 1", "kind 'bspline' has no open form"),
 ])

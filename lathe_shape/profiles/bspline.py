@@ -133,11 +133,11 @@ def control_points(points: np.ndarray, source: str, what: str) -> np.ndarray:
     check_point_count(len(p), source, "control points", _CHECK_SAMPLES, BSplineError)
     if not np.all(np.isfinite(p)):
         bad = int(np.argwhere(~np.all(np.isfinite(p), axis=1))[0, 0])
-        raise BSplineError(f"{source}: {what} control point {bad} is not finite: "
+        raise BSplineError(f"{source}: {what} control point {bad + 1} is not finite: "
                            f"{p[bad].tolist()}")
     if np.any(np.abs(p) >= MAX_COORDINATE):
         bad = int(np.argwhere(np.any(np.abs(p) >= MAX_COORDINATE, axis=1))[0, 0])
-        raise BSplineError(f"{source}: {what} control point {bad} is too large: {p[bad].tolist()} "
+        raise BSplineError(f"{source}: {what} control point {bad + 1} is too large: {p[bad].tolist()} "
                            f"(|r| and |z| must be below {MAX_COORDINATE:g}: their squares must fit "
                            f"in float32)")
     return p

@@ -187,22 +187,22 @@ def _checked_points(points: np.ndarray, source: str) -> np.ndarray:
     bad = ~np.all(np.isfinite(p), axis=1) | np.any(np.abs(p) >= MAX_COORDINATE, axis=1)
     if np.any(bad):
         k = int(np.argmax(bad))
-        raise SorError(f"{source}: sor point {k} is not finite or too large: {p[k].tolist()}")
+        raise SorError(f"{source}: sor point {k + 1} is not finite or too large: {p[k].tolist()}")
     if np.any(p[:, 0] < 0):
         k = int(np.argmax(p[:, 0] < 0))
-        raise SorError(f"{source}: sor point {k} has a negative radius r = {p[k, 0]:g} "
+        raise SorError(f"{source}: sor point {k + 1} has a negative radius r = {p[k, 0]:g} "
                        f"(POV-Ray: incorrect point)")
     h = p[:, 1]
     rising = h[2:-1] > h[1:-2]
     if not np.all(rising):
         k = int(np.argmin(rising)) + 2
-        raise SorError(f"{source}: sor point {k} (h = {h[k]:g}) is not above point {k - 1} "
-                       f"(h = {h[k - 1]:g}): the heights of points 1 .. n-2 must increase strictly "
+        raise SorError(f"{source}: sor point {k + 1} (h = {h[k]:g}) is not above point {k} "
+                       f"(h = {h[k - 1]:g}): the heights of points 2 .. n-1 must increase strictly "
                        f"(POV-Ray: incorrect point)")
     for a, b in ((0, 2), (len(p) - 3, len(p) - 1)):
         if h[a] == h[b]:
-            raise SorError(f"{source}: sor points {a} and {b} have the same height h = {h[a]:g}: "
-                           f"the slope at point {(a + b) // 2} is undefined (POV-Ray: incorrect point)")
+            raise SorError(f"{source}: sor points {a + 1} and {b + 1} have the same height h = {h[a]:g}: "
+                           f"the slope at point {(a + b) // 2 + 1} is undefined (POV-Ray: incorrect point)")
     return p
 
 
@@ -223,8 +223,8 @@ def _check_radius(wall: np.ndarray, p: np.ndarray, source: str) -> None:
         h = float(np.polynomial.polynomial.polyval(ts[j], wall[k, 1]))
         if v[j] < -tol:
             raise SorError(f"{source}: sor radius is imaginary (r^2 = {v[j]:.4g} < 0) near h = {h:.6g}, "
-                           f"between points {k + 1} and {k + 2}: the cubic r^2(h) dips below 0 "
+                           f"between points {k + 2} and {k + 3}: the cubic r^2(h) dips below 0 "
                            f"(move the points, or their neighbours that set the slopes)")
         if v[j] <= tol:
             raise SorError(f"{source}: sor curve touches the axis (r = 0) near h = {h:.6g}, between "
-                           f"points {k + 1} and {k + 2}; only its lowest and highest points may")
+                           f"points {k + 2} and {k + 3}; only its lowest and highest points may")

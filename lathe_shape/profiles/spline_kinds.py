@@ -88,9 +88,10 @@ def kind_coefficients(kind: str, points: np.ndarray, source: str = "profile") ->
         gap = np.any(ends != starts, axis=1)
         if np.any(gap):
             k = int(np.argmax(gap)) + 1
-            raise BSplineError(f"{source}: bezier segment {k} starts at {starts[k - 1].tolist()} "
-                               f"(control point {4 * k}) but segment {k - 1} ends at "
-                               f"{ends[k - 1].tolist()}: the curve must be connected")
+            raise BSplineError(f"{source}: bezier segment {k + 1} starts at {starts[k - 1].tolist()} "
+                               f"(control point {4 * k + 1}) but segment {k} ends at "
+                               f"{ends[k - 1].tolist()} (control point {4 * k}): the curve must be "
+                               f"connected (control points are numbered from 1)")
     count = (len(p) - width) // step + 1
     index = np.arange(count)[:, None] * step + np.arange(width)[None, :]
     return np.einsum("kj,ijc->ick", matrix, p[index])
