@@ -204,7 +204,8 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
 
         while dr.hint(active, max_iterations=-1, label="lathe_path"):
-            si, walk = geometry.ray_intersect_walk(ray, active, walk)
+            # (coherent camera rays: Embree traces them faster, as in Mitsuba's path)
+            si, walk = geometry.ray_intersect_walk(ray, active, walk, depth == 0)
             valid = si.is_valid()
 
             # ---------------- Direct emission (BSDF-sampled) ----------------

@@ -202,7 +202,7 @@ class LathePRBIntegrator(RBIntegrator):
         active = mi.Bool(active)                  # Lanes whose path is still going
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's prb
-        si = geometry.ray_intersect(ray, active)  # Current (detached) interaction
+        si = geometry.ray_intersect(ray, active, True)  # Current (detached) interaction
         ray_prev = mi.Ray3f(ray)                  # Ray that found the previous vertex ...
         si_prev = dr.zeros(mi.SurfaceInteraction3f)  # ... and that vertex (detached)
         bsdf_pdf_prev = mi.Float(1.0)             # BSDF pdf of the direction that led here

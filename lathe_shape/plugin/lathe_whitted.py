@@ -192,7 +192,7 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
 
         while dr.hint(active, max_iterations=-1, label="lathe_whitted"):
-            si = geometry.ray_intersect(ray, active)
+            si = geometry.ray_intersect(ray, active, depth == 0)  # camera rays: coherent
             valid = si.is_valid()
             valid_ray |= active & valid & (depth == 0)
 

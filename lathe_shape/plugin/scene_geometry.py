@@ -190,10 +190,13 @@ class ExactSceneGeometry:
         for group in self.groups:
             group.follow_moves()
 
-    def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool) -> mi.SurfaceInteraction3f:
-        """Nearest surface interaction along ``ray`` (``t = inf`` on a miss)."""
+    def ray_intersect(self, ray: mi.Ray3f, active: mi.Bool,
+                      coherent: mi.Bool | bool = False) -> mi.SurfaceInteraction3f:
+        """Nearest surface interaction along ``ray`` (``t = inf`` on a miss);
+        ``coherent``: as Mitsuba's (camera rays: Embree traces the rest of
+        the scene faster)."""
         self.follow_moves()
-        pi, si = self._rest_preliminary(ray, active)
+        pi, si = self._rest_preliminary(ray, active, coherent)
         won = mi.Bool(False)  # a lathe is nearer than the rest
         for lathe in self.single:
             ray_lathe = mi.Ray3f(ray)
@@ -207,15 +210,15 @@ class ExactSceneGeometry:
             si, won = dr.select(take, si_group, si), won | take
         return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won))
 
-    def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool,
-                           walk: LineWalk) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
+    def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
+                           coherent: mi.Bool | bool = False) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
         """Nearest surface interaction along ``ray``, a ray that may go on
         along the line of ``walk`` past its last lathe crossing (see
         :mod:`~lathe_shape.plugin.line_walk`): where it does, the lathes
         are queried on that line for the crossing after the one taken (no
         offset, none skipped or found twice); elsewhere as
-        :meth:`ray_intersect`. Returns the interaction (``t`` along
-        ``ray``) and the walk to pass with the next ray."""
+        :meth:`ray_intersect` (``coherent`` too). Returns the interaction
+        (``t`` along ``ray``) and the walk to pass with the next ray."""
         self.follow_moves()
         same = mi.Bool(active) & continues_line(ray, walk)
         line = mi.Ray3f(ray)
@@ -236,7 +239,7 @@ class ExactSceneGeometry:
         ray = mi.Ray3f(ray)
         ray.o = dr.select(same, line(t0), ray.o)
         ray.d = line.d
-        pi, si = self._rest_preliminary(ray, active)
+        pi, si = self._rest_preliminary(ray, active, coherent)
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
@@ -257,13 +260,13 @@ class ExactSceneGeometry:
             won |= take
         return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
 
-    def _rest_preliminary(self, ray: mi.Ray3f,
-                          active: mi.Bool) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
+    def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
+                          ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
         """Mitsuba's nearest hit with the non-lathe shapes: the preliminary
         intersection, and an interaction holding only its ``t`` (inf on a
         miss) for the lathes to compare with; the full interaction is
         computed only where no lathe is nearer (:meth:`_rest_interaction`)."""
-        pi = self.rest.ray_intersect_preliminary(ray, coherent=False, active=active)
+        pi = self.rest.ray_intersect_preliminary(ray, coherent=coherent, active=active)
         si = dr.zeros(mi.SurfaceInteraction3f)
         si.t = dr.select(pi.is_valid(), pi.t, dr.inf)
         return pi, si
