@@ -50,10 +50,12 @@ def mitsuba_channels(scene_path) -> list[str]:
     return [bitmap.struct_()[index].name for index in range(bitmap.channel_count())]
 
 
-def render_scene(tmp_path, capsys, pixel_format: str, integrator: str = "path", aovs: str = "") -> str:
-    """``lathe-render`` on :data:`SCENE`; returns the stem of the files written."""
+def render_scene(tmp_path, capsys, pixel_format: str, integrator: str = "path", aovs: str = "",
+                 nested: str = "") -> str:
+    """``lathe-render`` on :data:`SCENE` (``nested``: XML inside the
+    integrator); returns the stem of the files written."""
     scene = tmp_path / "vase.xml"
-    aov_xml = f'<string name="aovs" value="{aovs}"/>' if aovs else ""
+    aov_xml = (f'<string name="aovs" value="{aovs}"/>' if aovs else "") + nested
     scene.write_text(SCENE.format(integrator=integrator, aovs=aov_xml, pixel_format=pixel_format))
     code = render.main(["--variant", VARIANT, str(scene), "-o", str(tmp_path), "--seed", "1"])
     assert code == 0, capsys.readouterr().err
@@ -97,6 +99,16 @@ def test_integrator_aovs_are_kept(tmp_path, capsys):
     assert length.max() <= 1.001 and abs(length[5, 6] - 1.0) < 1e-2
     assert channels[albedo[0]].max() <= 0.501 and abs(channels[albedo[0]][5, 6] - 0.5) < 1e-3
     assert Image.open(stem + ".png").mode == "RGB"  # the AOVs are left out
+
+
+def test_aov_integrator_channels(tmp_path, capsys):
+    """Mitsuba's ``aov`` integrator around another one: ``mi.render``
+    returns fewer channels than the film holds; the EXR has the film's."""
+    stem = render_scene(tmp_path, capsys, "rgb", integrator="aov", aovs="dd.y:depth",
+                        nested='<integrator type="path" name="image"/>')
+    channels = exr_channels(stem + ".exr")
+    assert "dd.y.T" in channels and channels["dd.y.T"].max() > 4.0  # the lathe is 5-6 units away
+    assert Image.open(stem + ".png").mode == ("L" if MONO else "RGB")
 
 
 def test_write_images_checks_names(tmp_path):
