@@ -16,7 +16,8 @@ curves and the points of every ``scenes/*.csv`` and ``scenes/paper/*.csv``
 taken as B-spline control points (rays aimed at random points, at the
 leaves' joints and next to them).
 
-    python scripts/leak_test_bspline.py [N_RAYS] [--variant llvm_ad_rgb]   (default 1e6 rays in all)
+    python scripts/leak_test_bspline.py [N_RAYS | --rays N] [--chunk 250000] [--mesh-segments 512]
+                                        [--variant llvm_ad_rgb]   (default 1e6 rays in all)
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ GLASS = SCENES / "paper" / "glass_bspline.csv"
 
 
 def main() -> None:
-    args = leaks.leak_test_arguments(__doc__.splitlines()[0])
+    args = leaks.leak_test_arguments(__doc__.splitlines()[0], random_profiles=False)
     n_rays = args.n_rays
     curves = ("ring", "egg", "glass12")
     per_curve = n_rays // len(curves)

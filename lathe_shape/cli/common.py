@@ -63,6 +63,8 @@ import time
 from collections.abc import Callable
 from typing import TextIO, TypeVar
 
+import numpy as np
+
 from ..memory import available_memory, format_bytes
 
 __all__ = [
@@ -82,6 +84,7 @@ __all__ = [
     "check_render_options",
     "command_parser",
     "error_message",
+    "film_channels",
     "format_bytes",
     "format_duration",
     "interruptible",
@@ -90,6 +93,7 @@ __all__ = [
     "output_folder",
     "parse_defines",
     "parse_resolution",
+    "render_film",
     "render_image",
     "root_message",
     "run_command",
@@ -259,15 +263,38 @@ def error_message(error: BaseException) -> str:
     return f"{name}: {message}" if message else name
 
 
+#: What the variants of each Dr.Jit backend need: prefix -> (backend name, what).
+_BACKEND_NEEDS = {"cuda_": ("CUDA", "a CUDA GPU"), "llvm_": ("LLVM", "the LLVM library (libLLVM)")}
+
+
+def _check_backend(variant: str) -> None:
+    """Raise :class:`SceneError` when ``variant``'s Dr.Jit backend (CUDA,
+    LLVM) cannot run here, instead of Dr.Jit's error at the first kernel
+    (``jit_init_thread_state(): the CUDA backend hasn't been initialized``);
+    a CUDA variant's message proposes the LLVM one."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..tools.scenes import SceneError
+
+    for prefix, (backend, what) in _BACKEND_NEEDS.items():
+        if variant.startswith(prefix) and not dr.has_backend(getattr(dr.JitBackend, backend)):
+            cpu = "llvm_" + variant[len(prefix):]
+            instead = f" (use {cpu})" if prefix == "cuda_" and cpu in mi.variants() else ""
+            raise SceneError(f"variant '{variant}' needs {what}, and none was found{instead}")
+
+
 def select_variant(variant: str) -> None:
     """Select the Mitsuba ``variant`` and register the package's plugins for
-    it; raises :class:`SceneError` naming the available variants."""
+    it; raises :class:`SceneError` naming the available variants, or saying
+    that the variant's backend (a CUDA GPU, LLVM) is missing."""
     import mitsuba as mi
 
     from ..tools.scenes import SceneError
 
     if variant not in mi.variants():
         raise SceneError(f"unknown variant '{variant}' (available: {', '.join(mi.variants())})")
+    _check_backend(variant)
     try:
         mi.set_variant(variant)
         import lathe_shape
@@ -403,6 +430,28 @@ def render_image(scene, spp: int, seed: int, integrator):
     import mitsuba as mi
 
     return interruptible(lambda: mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy())
+
+
+def film_channels(film, image: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(pixels, channel names) of ``film`` after a render that returned
+    ``image``: the names Mitsuba gives the film's channels (``R``, ``G``,
+    ``B``[, ``A``], or ``Y`` for a luminance film, then the integrator's AOVs
+    as in its ``aov_names()``, e.g. ``albedo.R``), read from ``film.bitmap()``
+    as Mitsuba's own writer does. ``image`` is kept as rendered unless it
+    lacks channels the film holds (Mitsuba's ``aov`` integrator with a nested
+    integrator returns fewer than it stores): the film's bitmap then."""
+    bitmap = film.bitmap()
+    names = [bitmap.struct_()[index].name for index in range(bitmap.channel_count())]
+    if len(names) == image.shape[-1]:
+        return image, names
+    return np.asarray(bitmap, dtype=np.float32), names
+
+
+def render_film(scene, spp: int, seed: int, integrator) -> tuple[np.ndarray, list[str]]:
+    """:func:`render_image` with the channel names of the scene's first film
+    (:func:`film_channels`): (pixels (H, W, C), names)."""
+    image = render_image(scene, spp, seed, integrator)
+    return film_channels(scene.sensors()[0].film(), image)
 
 
 #: The completion events of :func:`interruptible` workers left running after Ctrl-C.

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 
@@ -52,9 +53,55 @@ def build_parser() -> argparse.ArgumentParser:
     add_output_option(parser, what=", ".join(FILES), default_help="SCENE_compare in the current folder")
     add_render_options(parser)
     parser.add_argument("--mesh-segments", type=int, metavar="N",
-                        help="azimuthal steps of the reference mesh (sets -D mesh_segments=N and every "
-                             "lathe's own parameter through the scene default)")
+                        help="azimuthal steps of the reference mesh: sets every lathe's mesh_segments "
+                             "parameter to N, whatever the scene file says (and -D mesh_segments=N "
+                             "where the scene uses $mesh_segments)")
     return parser
+
+
+def set_mesh_segments(xml_text: str, segments: int, source: str = "scene") -> str:
+    """The scene text with every ``<shape type="lathe">``'s
+    ``<integer name="mesh_segments">`` set to ``segments`` (added where the
+    lathe has none). Only those values change, so that Mitsuba's errors
+    about the edited text give the line and column of the file; raises
+    :class:`~..tools.scenes.SceneSyntaxError` for text that is not
+    well-formed XML."""
+    from xml.parsers import expat
+
+    from ..tools.scenes import _START_TAG, SceneSyntaxError, _with_value, blank_comments
+
+    data = xml_text.encode("utf-8")
+    parser = expat.ParserCreate()
+    lathes: list[list[int | None]] = []  # [start tag offset, mesh_segments tag offset or None]
+    path: list[str] = []  # the open elements, outermost first ("lathe" for a lathe shape)
+
+    def start(name: str, attributes: dict[str, str]) -> None:
+        if path[-1:] == ["lathe"] and attributes.get("name") == "mesh_segments":
+            lathes[-1][1] = parser.CurrentByteIndex
+        is_lathe = name == "shape" and attributes.get("type") == "lathe"
+        if is_lathe:
+            lathes.append([parser.CurrentByteIndex, None])
+        path.append("lathe" if is_lathe else name)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda name: path.pop()
+    try:
+        parser.Parse(blank_comments(data), True)
+    except expat.ExpatError as e:
+        raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
+    for lathe, child in reversed(lathes):  # from the end: earlier offsets stay valid
+        if child is not None:
+            tag = _START_TAG.match(data, child)
+            data = data[:tag.start()] + _with_value(tag.group(0), segments) + data[tag.end():]
+            continue
+        tag = _START_TAG.match(data, lathe)
+        added = f'<integer name="mesh_segments" value="{segments}"/>'.encode()
+        if tag.group(2):  # <shape type="lathe" .../>: open it, add the parameter, close it
+            added = b">" + added + b"</shape>"
+            data = data[:tag.end() - 2] + added + data[tag.end():]
+        else:
+            data = data[:tag.end()] + added + data[tag.end():]
+    return data.decode("utf-8")
 
 
 def diverging_map(x: np.ndarray) -> np.ndarray:
@@ -67,8 +114,15 @@ def diverging_map(x: np.ndarray) -> np.ndarray:
     return np.where(x < 0, white + (blue - white) * (-x), white + (red - white) * x)
 
 
-def _luminance(rgb: np.ndarray) -> np.ndarray:
-    return rgb[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+def _colour(image: np.ndarray) -> np.ndarray:
+    """The colour channels of a rendered image: R, G, B of an RGB(A) film,
+    Y of a luminance one (``*_mono`` variants), without alpha."""
+    return image[..., :3] if image.shape[-1] >= 3 else image[..., :1]
+
+
+def _luminance(image: np.ndarray) -> np.ndarray:
+    colour = _colour(image)
+    return colour[..., 0] if colour.shape[-1] == 1 else colour @ np.array([0.2126, 0.7152, 0.0722])
 
 
 def difference_image(exact: np.ndarray, mesh: np.ndarray, scale: float | None = None,
@@ -93,16 +147,8 @@ def difference_image(exact: np.ndarray, mesh: np.ndarray, scale: float | None = 
     return np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8), scale
 
 
-def _scene_max_depth(scene) -> int | None:
-    """max_depth of the scene's integrator, if it has one."""
-    import mitsuba as mi
-
-    integrator = scene.integrator()
-    if integrator is None:
-        return None
-    params = mi.traverse(integrator)
-    if "max_depth" in params:
-        return int(params["max_depth"])
+def _printed_max_depth(integrator) -> int | None:
+    """``max_depth = N`` from the integrator's description, if it says."""
     for line in str(integrator).splitlines():
         key, sep, value = line.strip().partition("=")
         if sep and key.strip() == "max_depth":
@@ -111,6 +157,20 @@ def _scene_max_depth(scene) -> int | None:
             except ValueError:
                 return None
     return None
+
+
+def _scene_max_depth(scene) -> int | None:
+    """max_depth of the scene's integrator, if it has one (-1: no limit)."""
+    import mitsuba as mi
+
+    integrator = scene.integrator()
+    if integrator is None:
+        return None
+    params = mi.traverse(integrator)
+    depth = int(params["max_depth"]) if "max_depth" in params else _printed_max_depth(integrator)
+    # Mitsuba keeps max_depth as a 32-bit unsigned integer: the -1 (no limit)
+    # of the scene file reads back as 4294967295. Print it as the file says.
+    return -1 if depth is not None and depth >= 2**31 else depth
 
 
 def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
@@ -122,8 +182,17 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
 
     check_render_options(args)
     check_at_least("--mesh-segments", args.mesh_segments, 3)
-    extra = {} if args.mesh_segments is None else {"mesh_segments": str(args.mesh_segments)}
-    scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra)
+    extra, edit = {}, None
+    if args.mesh_segments is not None:
+        from ..tools.scenes import blank_comments, read_scene_text
+
+        text = blank_comments(read_scene_text(args.scene).encode("utf-8")).decode("utf-8")
+        if re.search(r"\$mesh_segments(?!\w)", text):  # (Mitsuba refuses a define the scene does not use)
+            extra = {"mesh_segments": str(args.mesh_segments)}
+
+        def edit(xml_text: str, path: str) -> str:
+            return set_mesh_segments(xml_text, args.mesh_segments, path)
+    scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra, edit)
     from ..plugin.shape import scene_lathes  # (needs the variant open_scene selected)
 
     if not scene.sensors():
@@ -141,35 +210,36 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
 RUNS = {"exact": {"type": "lathe_path", "normal_check": "none"}, "mesh": {"type": "path"}}
 
 
-def render_both(args: argparse.Namespace, scene, spp: int, depth: int) -> dict[str, tuple[np.ndarray, float]]:
+def render_both(args: argparse.Namespace, scene, spp: int,
+                depth: int) -> dict[str, tuple[np.ndarray, float, list[str]]]:
     """Render ``exact`` (lathe_path, normal_check none) and ``mesh`` (path)
-    with the same seed; returns name -> (image, seconds)."""
+    with the same seed; returns name -> (image, seconds, channel names)."""
     import mitsuba as mi
 
-    from .common import render_image
+    from .common import render_film
 
     images = {}
     for name, integrator in RUNS.items():
         start = time.perf_counter()
-        rgb = render_image(scene, spp, args.seed, mi.load_dict({**integrator, "max_depth": depth}))
-        images[name] = rgb, time.perf_counter() - start
+        image, channels = render_film(scene, spp, args.seed, mi.load_dict({**integrator, "max_depth": depth}))
+        images[name] = image, time.perf_counter() - start, channels
         print(f"  {name:<5} ({RUNS[name]['type']}) rendered in {images[name][1]:.2f} s", flush=True)
     return images
 
 
 def write_comparison(args: argparse.Namespace, out: str, spp: int,
-                     images: dict[str, tuple[np.ndarray, float]]) -> float:
+                     images: dict[str, tuple[np.ndarray, float, list[str]]]) -> float:
     """Write ``exact`` and ``mesh`` (EXR + PNG) and ``diff.png``, each under a
     temporary name renamed when complete; returns the difference's scale."""
     import mitsuba as mi
 
     from ..tools.images import atomic_path, write_images
 
-    for name, (rgb, seconds) in images.items():
+    for name, (image, seconds, channels) in images.items():
         metadata = {"spp": int(spp), "integrator": RUNS[name]["type"], "seed": int(args.seed),
                     "variant": args.variant, "scene": os.path.abspath(args.scene),
                     "render_seconds": float(seconds)}
-        write_images(os.path.join(out, name), rgb, metadata)
+        write_images(os.path.join(out, name), image, metadata, channels=channels)
     diff_png, scale = difference_image(images["exact"][0], images["mesh"][0])
     with atomic_path(os.path.join(out, "diff.png")) as tmp:
         mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(tmp)
@@ -191,7 +261,7 @@ def compare(args: argparse.Namespace) -> int:
     )
     images = render_both(args, scene, spp, depth)
     scale = write_comparison(args, out, spp, images)
-    err = image_errors(images["mesh"][0], images["exact"][0])
+    err = image_errors(_colour(images["mesh"][0]), _colour(images["exact"][0]))
     print(f"  mesh vs exact: relative mean abs error {err['rel_mae']:.4f}, relative RMSE "
           f"{err['rel_rmse']:.4f}, max abs difference {err['max_abs']:.4f}, bias {err['bias']:+.4f}")
     print(f"  diff.png: luminance mesh - exact, blue -{scale:.3g} .. white 0 .. red +{scale:.3g} "

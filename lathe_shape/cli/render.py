@@ -1,6 +1,12 @@
 """``lathe-render``: render a Mitsuba scene with lathes to a linear EXR and an
 sRGB PNG preview.
 
+The EXR holds every channel of the film under Mitsuba's names (``R``, ``G``,
+``B``, ``A`` for an ``rgba`` film, ``Y`` for a ``luminance`` one or a
+``*_mono`` variant, then the integrator's AOVs, e.g. ``albedo.R`` or
+``nn.X``); the PNG shows the image itself (gray for one channel), without
+the AOVs.
+
 Example::
 
     lathe-render scenes/brandy_bottle.xml -o out --spp 64 -D integrator=lathe_path
@@ -24,7 +30,7 @@ from .common import (
     command_parser,
     open_scene,
     output_folder,
-    render_image,
+    render_film,
     run_command,
 )
 
@@ -65,7 +71,7 @@ def render(args: argparse.Namespace) -> int:
         flush=True,
     )
     start = time.perf_counter()
-    rgb = render_image(scene, spp, args.seed, integrator)
+    image, channels = render_film(scene, spp, args.seed, integrator)
     elapsed = time.perf_counter() - start
     metadata = {
         "spp": int(spp),
@@ -75,7 +81,7 @@ def render(args: argparse.Namespace) -> int:
         "scene": os.path.abspath(args.scene),
         "render_seconds": float(elapsed),
     }
-    written = write_images(stem, rgb, metadata, png=not args.no_png)
+    written = write_images(stem, image, metadata, png=not args.no_png, channels=channels)
     print(f"  rendered in {elapsed:.2f} s; wrote {', '.join(written)}")
     return 0
 

@@ -218,6 +218,12 @@ def open_job(args: argparse.Namespace) -> Job:
     backend, note = choose_backend(args.variant) if args.denoise else ("", "")
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution,
                        edit=box_filter_xml if args.denoise else None)
+    colours = scene.sensors()[0].film().base_channels_count() if scene.sensors() else 3
+    if args.denoise and colours < 3:  # (the denoisers take RGB with RGB albedo guides)
+        why = f"variant {args.variant} renders luminance only" if "_mono" in args.variant else \
+            "its pixel_format is not rgb or rgba"
+        raise CliError(f"{args.scene}: --denoise needs an RGB film, and the film has {colours} "
+                       f"channel(s) ({why})")
     turntable = Turntable(scene, args.mode, args.object, scene_path=args.scene, guides=args.denoise)
     sensor = turntable.sensor
     size = tuple(int(v) for v in sensor.film().size())

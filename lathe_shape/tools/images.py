@@ -4,14 +4,17 @@ and the one image-error metric every tool, script and test uses."""
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import OpenEXR
 
 __all__ = [
+    "DEFAULT_CHANNELS",
     "atomic_path",
+    "channel_names",
+    "image_channel_count",
     "image_errors",
     "read_exr",
     "relative_error",
@@ -39,39 +42,86 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
             os.remove(tmp)
 
 
+#: Channel names of an image given without names, by its channel count
+#: (Mitsuba's names for its films' pixel formats: luminance, luminance_alpha,
+#: rgb, rgba).
+DEFAULT_CHANNELS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
+
+
+def _channels(image: np.ndarray) -> np.ndarray:
+    """``image`` as an (H, W, C) array (an (H, W) image has one channel)."""
+    image = np.asarray(image)
+    return image[..., None] if image.ndim == 2 else image
+
+
+def channel_names(image: np.ndarray, channels: Sequence[str] | None = None) -> list[str]:
+    """The names of ``image``'s channels: ``channels`` (checked against the
+    channel count) or, when None, :data:`DEFAULT_CHANNELS`."""
+    count = _channels(image).shape[-1]
+    if channels is None:
+        if count not in DEFAULT_CHANNELS:
+            raise ValueError(f"an image of {count} channels needs channel names (1 to 4 have defaults)")
+        return list(DEFAULT_CHANNELS[count])
+    if len(channels) != count:
+        raise ValueError(f"{len(channels)} channel names for an image of {count} channels")
+    return list(channels)
+
+
+def image_channel_count(channels: Sequence[str]) -> int:
+    """How many leading ``channels`` are the image itself (R, G, B, A or Y,
+    A): those before the first AOV, whose names hold a dot (``albedo.R``,
+    as Mitsuba names an integrator's AOVs)."""
+    count = 0
+    while count < len(channels) and "." not in channels[count]:
+        count += 1
+    return count
+
+
 def write_exr(
     path: str | os.PathLike,
     rgb: np.ndarray,
     metadata: dict[str, object] | None = None,
     half: bool = False,
     layers: dict[str, np.ndarray] | None = None,
+    channels: Sequence[str] | None = None,
 ) -> None:
-    """Write an (H, W, 3) linear RGB image as a ZIP-compressed scanline EXR.
+    """Write an (H, W, C) linear image as a ZIP-compressed scanline EXR, every
+    channel under its name: ``channels`` (e.g. Mitsuba's film channels ``R``,
+    ``G``, ``B``, ``A``, ``albedo.R``, ...), by default those of
+    :data:`DEFAULT_CHANNELS` (``R``, ``G``, ``B`` for three channels).
 
     ``metadata`` entries (str, int, float) become EXR header attributes;
-    ``half`` stores 16-bit floats; each (H, W, 3) image of ``layers`` is
-    stored as ``NAME.R``, ``NAME.G``, ``NAME.B``.
+    ``half`` stores 16-bit floats; each image of ``layers`` (default channel
+    names) is stored as ``NAME.R``, ``NAME.G``, ``NAME.B`` (``NAME.Y`` for one
+    channel, ...).
     """
     dtype = np.float16 if half else np.float32
-    channels = {name: np.ascontiguousarray(np.asarray(image)[..., :3], dtype=dtype)
-                for name, image in {"RGB": rgb, **(layers or {})}.items()}
+    stored = {}
+    for prefix, image, names in [("", rgb, channels),
+                                 *((f"{name}.", image, None) for name, image in (layers or {}).items())]:
+        image = _channels(image)
+        for index, name in enumerate(channel_names(image, names)):
+            stored[prefix + name] = np.ascontiguousarray(image[..., index], dtype=dtype)
     header: dict[str, object] = {
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
     }
     for key, value in (metadata or {}).items():
         header[key] = value if isinstance(value, (int, float)) else str(value)
-    with OpenEXR.File(header, channels) as exr:
+    with OpenEXR.File(header, stored) as exr:
         exr.write(os.fspath(path))
 
 
 def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, object]]:
-    """Read an RGB EXR written by :func:`write_exr`: (pixels float32, header)."""
+    """Read an EXR written by :func:`write_exr`: (pixels float32, header), the
+    pixels (H, W, 3) RGB, or (H, W, 1) for a luminance (``Y``) image."""
     with OpenEXR.File(os.fspath(path)) as exr:
         header = dict(exr.header())
         channels = exr.channels()
         if "RGB" in channels:
             pixels = channels["RGB"].pixels
+        elif "Y" in channels:
+            pixels = channels["Y"].pixels[..., None]
         else:
             pixels = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
     return np.asarray(pixels, dtype=np.float32), header
@@ -85,26 +135,45 @@ def to_srgb8(rgb: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
-    """Write a linear RGB image as an sRGB 8-bit PNG preview."""
+    """Write a linear image as an sRGB 8-bit PNG preview: one channel (``Y``)
+    gray, two (``Y``, ``A``) gray with alpha, three RGB, four RGB with alpha.
+    Mitsuba's films store colour multiplied by alpha; PNG stores it divided
+    (straight alpha), so colour is divided by alpha here and alpha is kept
+    linear."""
     import mitsuba as mi
 
-    mi.Bitmap(to_srgb8(rgb), pixel_format=mi.Bitmap.PixelFormat.RGB).write(os.fspath(path))
+    image = _channels(rgb)
+    formats = {1: mi.Bitmap.PixelFormat.Y, 2: mi.Bitmap.PixelFormat.YA,
+               3: mi.Bitmap.PixelFormat.RGB, 4: mi.Bitmap.PixelFormat.RGBA}
+    count = image.shape[-1]
+    if count not in formats:
+        raise ValueError(f"write_png: an image of {count} channels is not gray, gray-alpha, RGB or RGBA")
+    colour = np.asarray(image[..., :3 if count >= 3 else 1], dtype=np.float64)
+    pixels = to_srgb8(colour)
+    if count in (2, 4):
+        alpha = np.clip(np.nan_to_num(np.asarray(image[..., -1:], dtype=np.float64)), 0.0, 1.0)
+        straight = np.divide(colour, alpha, out=np.zeros_like(colour), where=alpha > 0)
+        pixels = np.concatenate([to_srgb8(straight), np.round(alpha * 255.0).astype(np.uint8)], axis=-1)
+    mi.Bitmap(np.ascontiguousarray(pixels), pixel_format=formats[count]).write(os.fspath(path))
 
 
 def write_images(stem: str, rgb: np.ndarray, metadata: dict[str, object] | None = None,
                  png: bool = True, half: bool = False,
-                 layers: dict[str, np.ndarray] | None = None) -> list[str]:
-    """Write ``STEM.exr`` (with ``metadata``) and, when ``png``, the sRGB
-    preview ``STEM.png``, each under a temporary name renamed when both are
-    complete (the EXR last), so that an interrupted write leaves no partial
-    file; returns the paths written. ``half`` and ``layers`` as in
-    :func:`write_exr`."""
+                 layers: dict[str, np.ndarray] | None = None,
+                 channels: Sequence[str] | None = None) -> list[str]:
+    """Write ``STEM.exr`` (with ``metadata``; every channel of ``rgb``, named
+    as in :func:`write_exr`) and, when ``png``, the sRGB preview ``STEM.png``
+    of the image's own channels (:func:`image_channel_count`: AOVs are left
+    out), each under a temporary name renamed when both are complete (the EXR
+    last), so that an interrupted write leaves no partial file; returns the
+    paths written. ``half`` and ``layers`` as in :func:`write_exr`."""
 
+    names = channel_names(rgb, channels)
     paths = [stem + ".exr", stem + ".png"] if png else [stem + ".exr"]
     with atomic_path(paths[0]) as tmp_exr, (atomic_path(paths[1]) if png else nullcontext()) as tmp_png:
         if tmp_png:
-            write_png(tmp_png, rgb)
-        write_exr(tmp_exr, rgb, metadata, half, layers)
+            write_png(tmp_png, _channels(rgb)[..., :image_channel_count(names)])
+        write_exr(tmp_exr, rgb, metadata, half, layers, names)
     return paths
 
 

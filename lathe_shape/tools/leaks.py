@@ -55,22 +55,28 @@ __all__ = [
 ]
 
 
-def leak_test_arguments(description: str, argv: list[str] | None = None) -> argparse.Namespace:
+def leak_test_arguments(description: str, argv: list[str] | None = None,
+                        random_profiles: bool = True) -> argparse.Namespace:
     """The leak test scripts' options, parsed from ``argv`` (default: the
     command line): the number of rays in all (``--rays N`` or positionally,
-    default 1e6), ``--variant``, and for ``scripts/leak_test.py``
-    ``--random-profiles`` (the crossing test on random profiles instead of
-    the spawn-ray parity walk through ``scenes/*.csv``), ``--chunk`` and
-    ``--mesh-segments``. Selects the Mitsuba variant."""
+    default 1e6), ``--variant``, ``--chunk``, ``--mesh-segments`` and, when
+    ``random_profiles`` (``scripts/leak_test.py``), ``--random-profiles``
+    (the crossing test on random profiles instead of the spawn-ray parity
+    walk through ``scenes/*.csv``). Selects the Mitsuba variant."""
+    from ..cli.common import DEFAULT_VARIANT
+
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("n_rays", nargs="?", type=float, default=None, help="rays in all (default 1e6)")
-    parser.add_argument("--rays", type=float, default=None, help="rays in all (default 1e6)")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
-    parser.add_argument("--random-profiles", action="store_true",
-                        help="polylines: the float64 crossing test on random profiles")
-    parser.add_argument("--chunk", type=int, default=250_000, help="rays per batch (default 250000)")
+    parser.add_argument("n_rays", nargs="?", type=float, default=None, help="rays in all (default: 1e6)")
+    parser.add_argument("--rays", type=float, default=None, help="rays in all (default: 1e6)")
+    parser.add_argument("--variant", default=DEFAULT_VARIANT,
+                        help=f"Mitsuba JIT variant (default: {DEFAULT_VARIANT})")
+    if random_profiles:
+        parser.add_argument("--random-profiles", action="store_true",
+                            help="polylines: the float64 crossing test on random profiles "
+                                 "(default: the parity walk through scenes/*.csv)")
+    parser.add_argument("--chunk", type=int, default=250_000, help="rays per batch (default: 250000)")
     parser.add_argument("--mesh-segments", type=int, default=512,
-                        help="azimuthal steps of the compared mesh (default 512)")
+                        help="azimuthal steps of the compared mesh (default: 512)")
     args = parser.parse_args(argv)
     mi.set_variant(args.variant)
     args.n_rays = int(args.rays or args.n_rays or 1e6)

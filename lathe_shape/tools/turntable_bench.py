@@ -192,16 +192,57 @@ def run_bench(argv: list[str] | None = None) -> None:
               + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
 
 
+#: The default scene: the wine glass in the repository's scenes folder,
+#: found from any current folder.
+DEFAULT_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                             "scenes", "wine_glass.xml")
+
+
+def _scene_file(path: str) -> str:
+    """``--scene``: a readable, well-formed scene file with a lathe shape,
+    else the parser's one-line error naming the file and the problem."""
+    from .scenes import SceneError, lathe_ids, read_scene_text
+
+    try:
+        if not lathe_ids(read_scene_text(path), path):
+            raise SceneError(f"{path}: the scene has no <shape type=\"lathe\"> to turn")
+    except SceneError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return path
+
+
+def _square_side(text: str) -> int:
+    """``--resolution``: ``N`` or ``NxN`` (the bench renders square frames)."""
+    from ..cli.common import CliError, parse_resolution
+
+    try:
+        width, height = parse_resolution(text)
+    except CliError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if width != height:
+        raise argparse.ArgumentTypeError(f"the frames are square: give N or NxN, got {text!r}")
+    return width
+
+
 def bench_parser() -> argparse.ArgumentParser:
     """Options of ``scripts/bench_turntable.py``."""
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--scene", default="scenes/wine_glass.xml")
-    parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--resolution", type=int, default=128)
+    from ..cli.common import DEFAULT_VARIANT
+
+    parser = argparse.ArgumentParser(prog="bench_turntable.py", description=__doc__)
+    parser.add_argument("--scene", type=_scene_file, default=DEFAULT_SCENE,
+                        help="Mitsuba XML scene with a lathe "
+                             "(default: the repository's scenes/wine_glass.xml)")
+    parser.add_argument("--variant", default=DEFAULT_VARIANT,
+                        help=f"Mitsuba variant (default: {DEFAULT_VARIANT})")
+    parser.add_argument("--resolution", type=_square_side, default=128, metavar="NxN",
+                        help="frame size, NxN or N (default: 128x128)")
     parser.add_argument("--frames", type=int, default=8, help="frames of the timing run (default: 8)")
-    parser.add_argument("--spp", type=int, default=16)
-    parser.add_argument("--high-spp", type=int, default=256)
-    parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("--spp", type=int, default=16, help="samples per pixel of the frames (default: 16)")
+    parser.add_argument("--high-spp", type=int, default=256,
+                        help="samples per pixel of the high-spp frame and of the flicker run's motion "
+                             "reference (default: 256)")
+    parser.add_argument("--reference-spp", type=int, default=1024,
+                        help="samples per pixel of the reference (default: 1024)")
     parser.add_argument("--clean-spp", type=int, default=4096,
                         help="a second, cleaner reference for the denoise errors (0: none; default: 4096)")
     parser.add_argument("-D", dest="defines", action="append", default=None, metavar="KEY=VALUE",

@@ -1,0 +1,80 @@
+"""``lathe-compare --mesh-segments`` on any scene, volpath's unlimited depth
+printed as -1, and a CUDA variant refused clearly without a GPU."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import pytest
+from conftest import SCENES, VARIANT
+
+from lathe_shape.cli import compare, render
+from lathe_shape.cli.compare import _scene_max_depth, open_comparison, set_mesh_segments
+from lathe_shape.plugin.shape import scene_lathes
+
+#: Lathes that say nothing of mesh_segments (one self-closing), one with a
+#: literal value, none with a scene default; volpath with its default depth.
+SCENE = """<scene version="3.0.0">
+  <integrator type="volpath"/>
+  <sensor type="perspective"><transform name="to_world"><lookat origin="0,-6,2" target="0,0,0.5" up="0,0,1"/>
+    </transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>
+  </sensor>
+  <emitter type="constant"/>
+  <shape type="lathe" id="a"><string name="profile" value="0 0, 0.6 0, 0.4 1, 0 1"/>
+     <integer name="mesh_segments" value="300"/><bsdf type="dielectric"/></shape>
+  <shape type="lathe" id="b"><string name="profile" value="0 2, 0.5 2, 0 3"/></shape>
+  <!-- <shape type="lathe" id="in_a_comment"/> -->
+  <shape type="lathe" id="c" ><string name="profile" value="0 4, 0.5 4, 0 5"/>
+  </shape>
+</scene>"""
+
+
+def test_mesh_segments_sets_every_lathe(tmp_path, capsys):
+    scene = tmp_path / "three.xml"
+    scene.write_text(SCENE)
+    args = compare.build_parser().parse_args(
+        [str(scene), "-o", str(tmp_path / "out"), "--mesh-segments", "8", "--variant", VARIANT])
+    loaded, lathes, _, _ = open_comparison(args)
+    assert lathes == 3 and [lathe.mesh_segments for lathe in scene_lathes(loaded)] == [8, 8, 8]
+
+
+def test_mesh_segments_edit_keeps_lines():
+    edited = set_mesh_segments(SCENE, 12)
+    assert edited.count("\n") == SCENE.count("\n")
+    assert edited.count('<integer name="mesh_segments" value="12"/>') == 3 and 'value="300"' not in edited
+    assert set_mesh_segments('<scene version="3.0.0"><shape type="lathe" id="x" /></scene>', 9) == (
+        '<scene version="3.0.0"><shape type="lathe" id="x" ><integer name="mesh_segments" value="9"/>'
+        '</shape></scene>')
+    with_default = (SCENES / "wine_glass.xml").read_text()
+    assert '<integer name="mesh_segments" value="$mesh_segments"/>' in with_default
+    assert '<integer name="mesh_segments" value="7"/>' in set_mesh_segments(with_default, 7)
+
+
+def test_compare_any_scene_and_infinite_depth(tmp_path, capsys):
+    """The scene declares no mesh_segments default; volpath's default
+    max_depth is printed as the scene file would say it."""
+    scene = tmp_path / "three.xml"
+    scene.write_text(SCENE)
+    code = compare.main([str(scene), "-o", str(tmp_path / "out"), "--mesh-segments", "8", "--spp", "1",
+                         "--variant", VARIANT])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "  8x6, 1 spp, max_depth -1, seed 0" in out
+    for name in compare.FILES:
+        assert (tmp_path / "out" / name).is_file()
+
+
+def test_scene_max_depth_of_volpath():
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "volpath"}})
+    assert _scene_max_depth(scene) == -1
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 5}})
+    assert _scene_max_depth(scene) == 5
+
+
+@pytest.mark.skipif(dr.has_backend(dr.JitBackend.CUDA), reason="a CUDA GPU is present")
+def test_cuda_variant_without_gpu(tmp_path, capsys):
+    code = render.main(["--variant", "cuda_ad_rgb", str(SCENES / "wine_glass.xml"), "-o", str(tmp_path)])
+    assert code == 2 and capsys.readouterr().err == (
+        "lathe-render: error: variant 'cuda_ad_rgb' needs a CUDA GPU, and none was found (use llvm_ad_rgb)\n")
+    assert mi.variant() == VARIANT and list(tmp_path.iterdir()) == []
