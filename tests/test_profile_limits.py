@@ -230,7 +230,7 @@ def test_point_limits(tmp_path, monkeypatch):
 def test_coordinates_too_large():
     with pytest.raises(ProfileError, match=r"p, point 2: coordinate too large \(1e\+308, 0\)"):
         make_profile(np.array([[0, 0], [1e308, 0], [1, 1], [0, 1]]), source="p")
-    with pytest.raises(ProfileError, match="control point 1 is too large"):
+    with pytest.raises(ProfileError, match="control point 2 is too large"):
         make_bspline_profile(np.array([[0, 0], [1e20, 0], [1, 1], [0, 1]]), "p")
 
 
