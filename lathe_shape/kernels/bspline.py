@@ -199,9 +199,13 @@ _TANGENT_ULPS = 8.0
 #: Width of an unresolved root pair in z, in units of sqrt(tol / a).
 _PAIR_WIDTH = 4.0
 
+#: Levels by which a leaf's piece may be halved until F or F' is
+#: monotonic on it (:func:`_solve_piece`).
+_MAX_DEPTH = 3
+
 #: Crossing keys per leaf (next_crossing_bspline): two per monotonic
-#: interval of F, at most six intervals.
-_KEYS_PER_LEAF = 16
+#: interval of F, two intervals per piece of the deepest level.
+_KEYS_PER_LEAF = 4 << _MAX_DEPTH
 
 
 class BSplineData(LatheData):
@@ -528,29 +532,6 @@ def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
     return a, b, dr.select(done, x, x_new), dx, x_new - x, done, best_x, best_f
 
 
-def _isolate_critical(derivs: list, lo, hi) -> list:
-    """Sorted critical points of ``derivs[0]`` (degree k) on [lo, hi]: the
-    roots of its derivative, found level by level from the linear
-    ``derivs[-1]`` up. ``derivs[j]`` is the j-th derivative of ``derivs[0]``.
-    Missing points are filled with interval ends (harmless: they only split a
-    monotonic interval). Returns k - 1 values."""
-    # The root of the linear derivs[-1] is the critical point of derivs[-2].
-    lin = derivs[-1]
-    x = dr.select(lin[1] != 0, -lin[0] / lin[1], hi)
-    x = dr.select(dr.isfinite(x), x, hi)
-    crit = [dr.clip(x, lo, hi)]
-    # Levels of degree 2 .. k-1: each turns its critical points into its
-    # roots, which are the critical points of the level above.
-    for level in range(len(derivs) - 2, 0, -1):
-        c = derivs[level]
-        dc = derivs[level + 1]
-        xs = [lo] + crit + [hi]
-        fs = [_polyval(c, xk) for xk in xs]
-        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
-        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
-    return crit
-
-
 # ---------------------------------------------------------------------------
 # Ray setup and culling
 # ---------------------------------------------------------------------------
@@ -675,6 +656,30 @@ def _one_sign(c: list, tol):
     return (lo > tol) | (hi < -tol)
 
 
+def _bezier_to_power(b) -> list:
+    """Ascending power coefficients of the Bezier cubic with control values
+    ``b`` (a Vector4f)."""
+    d1, d2, d3 = b.y - b.x, b.z - b.y, b.w - b.z
+    return [b.x, 3.0 * d1, 3.0 * (d2 - d1), (d3 - d2) - (d2 - d1)]
+
+
+def _de_casteljau(b: list, x) -> tuple[list, list]:
+    """Bernstein coefficients of the polynomial with coefficients ``b`` on
+    [0, 1] restricted to [0, x] and to [x, 1] (de Casteljau's algorithm)."""
+    left, right, row = [b[0]], [b[-1]], list(b)
+    while len(row) > 1:
+        row = [dr.fma(x, row[i + 1] - row[i], row[i]) for i in range(len(row) - 1)]
+        left.append(row[0])
+        right.append(row[-1])
+    return left, right[::-1]
+
+
+def _bernstein_piece(b: list, x0, x1) -> list:
+    """Bernstein coefficients of the polynomial with coefficients ``b`` on
+    [0, 1] restricted to [x0, x1] (``0 <= x0 < x1``)."""
+    return _de_casteljau(_de_casteljau(b, x1)[0], x0 / x1)[1]
+
+
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
     """One traversal step: ``(candidate, next node)``. A candidate is a leaf
     whose box the ray enters before ``best`` (:func:`_solve_leaf` tests its
@@ -695,30 +700,31 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
 
 class _Best(metaclass=common.VariantStruct):
     """The crossings found so far on a ray: the first one in the ray's order
-    (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its curve
-    parameter ``u``, segment ``seg`` and crossing key ``key``, and ``count``,
-    the number of crossings (counting rays only)."""
+    (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its ``leaf`` and
+    parameter ``u`` there (the segment and its parameter follow once, at the
+    end of the traversal: :func:`_leaf_to_segment`) and crossing key
+    ``key``, and ``count``, the number of crossings (counting rays only)."""
 
-    _FIELDS = {"s": "Float", "u": "Float", "seg": "UInt32", "key": "UInt32", "count": "UInt32"}
+    _FIELDS = {"s": "Float", "u": "Float", "leaf": "UInt32", "key": "UInt32", "count": "UInt32"}
 
-    def __init__(self, s=None, u=None, seg=None, key=None, count=None) -> None:
+    def __init__(self, s=None, u=None, leaf=None, key=None, count=None) -> None:
         self.s = mi.Float(dr.inf) if s is None else s
         self.u = mi.Float(0.0) if u is None else u
-        self.seg = mi.UInt32(0) if seg is None else seg
+        self.leaf = mi.UInt32(0) if leaf is None else leaf
         self.key = mi.UInt32(0) if key is None else key
         self.count = mi.UInt32(0) if count is None else count
 
 
-def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
-    """``best`` with the crossing ``(s, key)`` at curve parameter ``t`` on
-    segment ``seg`` (lanes ``ok``) taken into account, as the ray's mode
+def _offer(best: _Best, ray: _Ray, s, u, leaf, key, ok) -> _Best:
+    """``best`` with the crossing ``(s, key)`` at parameter ``u`` of leaf
+    ``leaf`` (lanes ``ok``) taken into account, as the ray's mode
     says: ``nearest``, the least ``s`` after ``s_lo`` (ties: the first
     offered); ``keyed``, the least ``(s, key)`` after ``ray.after`` (ties in
     ``s`` broken by the key, so that a walk through a ray's crossings finds
     each once); ``count``, every crossing after ``s_lo``."""
     ok = ok & dr.isfinite(s)
     if ray.mode == "count":
-        return _Best(best.s, best.u, best.seg, best.key,
+        return _Best(best.s, best.u, best.leaf, best.key,
                      best.count + mi.UInt32(ok & (s > ray.s_lo) & (s < ray.s_max)))
     if ray.mode == "keyed":
         after_s, after_key = ray.after
@@ -728,29 +734,27 @@ def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
     else:
         take = ok & (s > ray.s_lo) & (s < best.s)
         key = best.key  # unused: no work on the hot path
-    return _Best(dr.select(take, s, best.s), dr.select(take, t, best.u),
-                 dr.select(take, seg, best.seg), key, best.count)
+    return _Best(dr.select(take, s, best.s), dr.select(take, u, best.u),
+                 dr.select(take, leaf, best.leaf), key, best.count)
 
 
 class _Leaf:
-    """A candidate leaf's cubics (local parameter u), its placement in the
-    segment (t = t0 + h u), F in power form and its error bound, and the
-    first crossing key of the leaf (:func:`_offer`)."""
+    """A candidate leaf's cubics (local parameter u), F in power form and
+    its error bound, and the first crossing key of the leaf
+    (:func:`_offer`). Only the Bezier control points are read: the power
+    form follows from them in a few operations (fewer loads)."""
 
     def __init__(self, data: BSplineData, node, leaf, ray: _Ray, m):
         base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        Rp = dr.gather(mi.Vector4f, data.leaf, base + 2, m)
-        Zp = dr.gather(mi.Vector4f, data.leaf, base + 3, m)
-        meta = dr.gather(mi.Vector4f, data.leaf, base + 4, m)
-        self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
+        self.leaf = leaf
         self.key = leaf * _KEYS_PER_LEAF
         if ray.mode == "keyed":
             # Crossings stay within the leaf's box (_into_box)
             self.box = dr.gather(mi.Vector4f, data.nodes, node, m)
-        self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
-        self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
+        self.R = _bezier_to_power(Rb)
+        self.Z = _bezier_to_power(Zb)
         self.squared = _squared(data)  # R holds R^2 (eq. 20)
         self.Gb, self.tol = _hull(Rb, Zb, ray, self.squared)
         # F at the leaf's ends, from the joints it shares with its
@@ -793,12 +797,14 @@ def _interval_roots(lf: _Leaf, intervals: list) -> list:
     return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True)
 
 
-def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, slot: int,
-                   touch=True) -> _Best:
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, key,
+                   crit0=False, crit1=False) -> _Best:
     """The crossings of the ray on [x0, x1], where ``F`` is monotonic
     (values ``f0``, ``f1`` at the ends; ``root``: from
     :func:`_interval_roots`), offered to ``best`` (:func:`_offer`) with the
-    keys ``lf.key + 2 slot`` and ``+ 1``.
+    keys ``key`` and ``key + 1``. ``crit0``, ``crit1``: whether the lower,
+    upper end is a critical point of ``F`` found inside the piece (see
+    :func:`_solve_piece`), not the end of a piece.
 
     Parity first: along the leaf's intervals ``f1`` of one is ``f0`` of the
     next, and the leaf's first and last values are ``F`` at its joints,
@@ -810,15 +816,14 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     of a pair that float32 cannot resolve, else the same point twice): at
     the interval's upper end ``x1``, when ``|f1|`` is within float32 noise
     of 0 without a sign change (the lower end belongs to the interval
-    before), where ``x1`` is a critical point inside the leaf and
-    ``touch`` (False where ``F`` is monotonic on the leaf: no double root).
+    before), where ``x1`` is a critical point inside the leaf (``crit1``).
     (At a joint ``F`` within noise of 0 is mostly a crossing that float32
     cannot place on either leaf, which one of them reports; a tangent there
     counts as none.) See the module docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
     u, found = root
-    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & touch
+    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & crit1
     u = dr.select(found, u, x1)
     Rt = _polyval(lf.R, u)
     R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
@@ -854,30 +859,15 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     near0 = dr.abs(f0) <= dr.abs(f1)  # the end nearer a root pair's centre
     centre = dr.select(near0, x0, x1)
     pair = found & unresolved & (dr.minimum(dr.abs(f0), dr.abs(f1)) <= tol) & (centre > 0) & (centre < 1)
+    pair &= dr.select(near0, crit0, crit1)
     above = (dZ > 0) == near0
     take1 = dr.select(pair, above != (dz >= 0), (e1 <= e2) | both)
     first = dr.select(steep, s_z, dr.select(take1, s1, s2))
     second = dr.select(steep, s_z, dr.select(both, s2, first))
     if ray.mode == "keyed":
         first, second = _into_box(ray, lf.box, first), _into_box(ray, lf.box, second)
-    t = dr.fma(lf.h, u, lf.t0)
-    best = _offer(best, ray, first, t, lf.seg, lf.key + 2 * slot, m & (found | touching))
-    return _offer(best, ray, second, t, lf.seg, lf.key + (2 * slot + 1), touching)
-
-
-def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
-    """General leaf: all critical points of F by the derivative chain, then
-    its six monotonic intervals (the leaf's ends valued at its joints)."""
-    lo, hi = mi.Float(0.0), mi.Float(1.0)
-    derivs = [lf.F, lf.dF]
-    for _ in range(4):
-        derivs.append(_polyder(derivs[-1]))
-    xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
-    fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
-    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
-    for slot, (interval, root) in enumerate(zip(intervals, _interval_roots(lf, intervals), strict=True)):
-        best = _take_interval(lf, ray, *interval[:4], root, best, m, slot)
-    return best
+    best = _offer(best, ray, first, u, lf.leaf, key, m & (found | touching))
+    return _offer(best, ray, second, u, lf.leaf, key + 1, touching)
 
 
 @dr.syntax
@@ -895,36 +885,69 @@ def _solve_leaf(data: BSplineData, node, leaf, ray: _Ray, best: _Best, m) -> _Be
 
 @dr.syntax
 def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
-    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
-    # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
-    # first and second differences of those of F, with errors below 2 tol
-    # and 4 tol.
-    Gb = lf.Gb
-    db = [Gb[k + 1] - Gb[k] for k in range(6)]
-    ddb = [db[k + 1] - db[k] for k in range(5)]
-    mono = _one_sign(db, 2.0 * lf.tol)
-    simple = mono | _one_sign(ddb, 4.0 * lf.tol)
-    # F' keeps its sign: F is monotonic on [0, 1] (most leaves), one
-    # interval, and no tangent. Else F'' keeps its sign: F' is monotonic, F
-    # has at most one critical point c (none: c = 1) and at most two roots,
-    # on [0, c] and [c, 1]; packets without such a lane skip that work.
-    fast = m & simple
-    split = fast & ~mono
-    c = mi.Float(1.0)            # the critical point (1: none)
-    f_c = mi.Float(lf.f1)        # F(c)
-    if split:
-        c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
-                             sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
-        f_c = _value(lf, ray, c)
-    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.f0, f_c, fast),
-                                         (c, mi.Float(1.0), f_c, lf.f1, split)])
-    best = _take_interval(lf, ray, mi.Float(0.0), c, lf.f0, f_c, first, best, fast, 0, ~mono)
-    if split:
-        best = _take_interval(lf, ray, c, mi.Float(1.0), f_c, lf.f1, second, best, split, 1)
-    slow = m & ~simple
-    if slow:
-        best = _solve_chain(lf, ray, best, slow)
+    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed: the
+    leaf's pieces (:func:`_solve_piece`) from ``u = 0`` to 1, each starting
+    with the value of ``F`` where the one before ended (the parity rule of
+    :func:`_take_interval`)."""
+    pos = mi.UInt32(0)     # the current piece is [pos, pos + 1] / 2^level ...
+    level = mi.UInt32(0)   # ... of the leaf's parameter u
+    f0 = mi.Float(lf.f0)   # F at the piece's start (sign: _side)
+    active = mi.Bool(m)    # lanes with pieces left
+    while active:
+        best, pos, level, f0, active = _solve_piece(lf, ray, best, pos, level, f0, active)
     return best
+
+
+@dr.syntax
+def _solve_piece(lf: _Leaf, ray: _Ray, best: _Best, pos, level, f0, active):
+    """One step of :func:`_solve_body`: the crossings on the piece
+    ``[pos, pos + 1] / 2^level`` of the leaf (lanes ``active``; ``f0``: F at
+    its start), or the piece halved. Returns ``(best, pos, level, f0,
+    active)`` for the next piece.
+
+    The Bernstein coefficients of ``F`` on the piece (the leaf's own, or
+    de Casteljau's on a part of it) bound those of ``F'`` and ``F''`` (their
+    first and second differences, with errors below 2 tol and 4 tol). Where
+    ``F'`` keeps its sign, ``F`` is monotonic on the piece (most leaves): one
+    interval, no tangent. Else where ``F''`` keeps its sign, ``F`` has at
+    most one critical point ``c`` there and at most two roots, on [x0, c]
+    and [c, x1]. Else the piece is halved, down to ``_MAX_DEPTH`` levels
+    (a piece still not that simple, ``F`` with a critical point next to an
+    inflection, is taken as such: its crossings keep their parity, but a
+    pair of close roots there may go unseen)."""
+    width = 1.0 / mi.Float(mi.UInt32(1) << level)
+    x0 = mi.Float(pos) * width
+    x1 = x0 + width          # exact: width is a power of 2
+    Gb = lf.Gb               # Bernstein coefficients of F on the piece
+    if active & (level > 0):
+        Gb = _bernstein_piece(lf.Gb, x0, x1)
+    db = [Gb[k + 1] - Gb[k] for k in range(6)]
+    mono = _one_sign(db, 2.0 * lf.tol)
+    simple = mono | _one_sign([db[k + 1] - db[k] for k in range(5)], 4.0 * lf.tol)
+    deeper = active & ~simple & (level < _MAX_DEPTH)
+    here = active & ~deeper  # lanes that solve this piece
+    f1 = dr.select(x1 < 1.0, _value(lf, ray, x1), lf.f1)
+    c = mi.Float(x1)         # the critical point (x1: none) ...
+    f_c = mi.Float(f1)       # ... F there
+    inner = mi.Bool(False)   # ... and whether there is one
+    if here & ~mono:
+        ddF = _polyder(lf.dF)
+        c, inner = _bracket_root(lf.dF, ddF, x0, x1, _polyval(lf.dF, x0), _polyval(lf.dF, x1),
+                                 _STEPS_CRIT)
+        inner &= here & ~mono
+        c = dr.select(inner, c, x1)
+        f_c = dr.select(inner, _value(lf, ray, c), f1)
+    first, second = _interval_roots(lf, [(x0, c, f0, f_c, here), (c, x1, f_c, f1, inner)])
+    key = lf.key + (pos << (_MAX_DEPTH - level)) * 4
+    best = _take_interval(lf, ray, x0, c, f0, f_c, first, best, here, key, False, inner)
+    if inner:
+        best = _take_interval(lf, ray, c, x1, f_c, f1, second, best, inner, key + 2, inner)
+    # The next piece: the first half of this one, or the one after it (up
+    # as many levels as it ends a first half)
+    pos = dr.select(deeper, 2 * pos, pos + 1)
+    level = dr.select(deeper, level + 1, level)
+    up = dr.select(here, dr.minimum(dr.tzcnt(pos), level), 0)
+    return best, pos >> up, level - up, dr.select(here, f1, f0), active & ~(here & (x1 >= 1.0))
 
 
 @dr.syntax
@@ -949,11 +972,19 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
         hit |= best.s < ray.s_max
         node = dr.select(cand, node + 1, node)
     valid = best.s < ray.s_max
-    s, u = best.s, best.u
+    s = best.s
+    seg, u = _leaf_to_segment(data, best, valid)
     if not shadow:
-        s, u = _polish(data, ray, s, u, best.seg, valid)
+        s, u = _polish(data, ray, s, u, seg, valid)
     t = dr.select(valid, (s + ray.s_enter) * ray.t_scale, dr.inf)
-    return BSplineHit(t=t, seg=best.seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
+    return BSplineHit(t=t, seg=seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
+
+
+def _leaf_to_segment(data: BSplineData, best: _Best, active):
+    """The segment of the crossing ``best`` and its parameter there, ``t =
+    t0 + h u`` (the leaf's placement in its segment)."""
+    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 4, active)
+    return mi.UInt32(meta.z), dr.fma(meta.y, best.u, meta.x)
 
 
 def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
