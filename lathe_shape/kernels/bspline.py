@@ -189,6 +189,13 @@ _R0_REL_TOL = 1e-5
 #: Steps below this (about the float32 spacing near u = 1) end a root search.
 _T_RESOLUTION = 1e-7
 
+#: A Newton step below this ends a root search after it is taken.
+_T_FINAL = 1e-4
+
+#: A root search of F ends where |F| is below this many times its error
+#: bound tol.
+_NOISE_STOP = 1.0
+
 #: Newton steps polishing the nearest hit on the (s, t) system.
 _STEPS_POLISH = 2
 
@@ -462,7 +469,8 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
 
 
-def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False) -> list:
+def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False,
+                   noise=0.0) -> list:
     """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
     of one polynomial at once (``mask``: lanes that search it, ``None``:
     all), in one symbolic loop: every bracket takes the same steps as on its
@@ -473,7 +481,9 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
     ``strict``: a root is found exactly where ``f0 < 0`` and ``f1 < 0``
     differ (0 counts as positive), so that along a chain of brackets the
     found roots change the sign as often as the ends do (the parity rule of
-    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0."""
+    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0.
+    ``noise``: a bound on the float32 error of ``c``: a point where ``|c|``
+    is below it is as good a root as float32 can tell, and ends the search."""
     state, starts = [], []
     for x0, x1, f0, f1, mask in brackets:
         if strict:
@@ -497,7 +507,7 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
         return todo & (k < steps)
 
     def step(k, state):
-        return k + 1, [_newton_step(c, dc, bracket, neg0)
+        return k + 1, [_newton_step(c, dc, bracket, neg0, noise)
                        for bracket, (_, neg0) in zip(state, starts, strict=True)]
 
     _, state = dr.while_loop((mi.UInt32(0), state), pending, step)
@@ -508,7 +518,7 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
     return out
 
 
-def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
+def _newton_step(c: list, dc: list, bracket: tuple, neg0, noise) -> tuple:
     """One safeguarded Newton step of :func:`_bracket_roots` on one bracket
     state (the order of its fields is documented there)."""
     a, b, x, dx_old, dx, done, best_x, best_f = bracket
@@ -524,12 +534,16 @@ def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
     # Converged: an exact zero, or a Newton step below float32 resolution of
     # t (checked first: the test below would then pick bisection and jump
     # away from the root).
-    done = done | (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
+    done = done | (dr.abs(f) <= dr.maximum(_T_RESOLUTION * dr.abs(df), noise))
     # Newton unless it leaves [a, b] or converges slower than bisection.
     xn = x - f / df
     newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
     x_new = dr.select(newton, xn, 0.5 * (a + b))
-    return a, b, dr.select(done, x, x_new), dx, x_new - x, done, best_x, best_f
+    # A Newton step below _T_FINAL is the last one: the next would be of
+    # its square's order, below float32 resolution (saves an evaluation).
+    last = ~done & newton & (dr.abs(f) <= _T_FINAL * dr.abs(df))
+    best_x = dr.select(last, xn, best_x)
+    return a, b, dr.select(done, x, x_new), dx, x_new - x, done | last, best_x, best_f
 
 
 # ---------------------------------------------------------------------------
@@ -794,7 +808,7 @@ def _interval_roots(lf: _Leaf, intervals: list) -> list:
     mask)`` where it is monotonic (values ``f0``, ``f1`` at the ends), for
     :func:`_take_interval`: one loop for all (:func:`_bracket_roots`), a
     root where the signs of the ends differ (strictly)."""
-    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True)
+    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True, noise=_NOISE_STOP * lf.tol)
 
 
 def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, key,
@@ -975,7 +989,8 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
     s = best.s
     seg, u = _leaf_to_segment(data, best, valid)
     if not shadow:
-        s, u = _polish(data, ray, s, u, seg, valid)
+        if valid:  # (a packet without a hit skips it)
+            s, u = _polish(data, ray, s, u, seg, valid)
     t = dr.select(valid, (s + ray.s_enter) * ray.t_scale, dr.inf)
     return BSplineHit(t=t, seg=seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
 
@@ -985,6 +1000,14 @@ def _leaf_to_segment(data: BSplineData, best: _Best, active):
     t0 + h u`` (the leaf's placement in its segment)."""
     meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 4, active)
     return mi.UInt32(meta.z), dr.fma(meta.y, best.u, meta.x)
+
+
+def _segment_cubics(data: BSplineData, seg, active) -> tuple[list, list]:
+    """Power coefficients of ``R`` (or ``R^2``) and ``Z`` of segment
+    ``seg``: two loads of four adjacent floats."""
+    R = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4), active)
+    Z = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4) + 1, active)
+    return [R.x, R.y, R.z, R.w], [Z.x, Z.y, Z.z, Z.w]
 
 
 def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
@@ -997,9 +1020,7 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     these residuals are not. A step is kept only when the Jacobian is well
     conditioned and it stays small and on the segment (grazing hits keep the
     root-finder's answer)."""
-    base = seg * _STRIDE
-    R = [dr.gather(mi.Float, data.seg, base + k, active) for k in range(4)]
-    Z = [dr.gather(mi.Float, data.seg, base + 4 + k, active) for k in range(4)]
+    R, Z = _segment_cubics(data, seg, active)
     o, dh = ray.o, ray.d
     squared = _squared(data)
     for _ in range(_STEPS_POLISH):
@@ -1105,9 +1126,7 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     segment's chord gives its limit direction. ``uv = (azimuth / 2 pi, (seg +
     u) / n_seg)``.
     """
-    base = seg * _STRIDE
-    R = [dr.gather(mi.Float, data.seg, base + k) for k in range(4)]
-    Z = [dr.gather(mi.Float, data.seg, base + 4 + k) for k in range(4)]
+    R, Z = _segment_cubics(data, seg, True)
     Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
     tan_r, tan_z = dR, dZ
