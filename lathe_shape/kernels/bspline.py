@@ -192,10 +192,6 @@ _T_RESOLUTION = 1e-7
 #: A Newton step below this ends a root search after it is taken.
 _T_FINAL = 1e-4
 
-#: A root search of F ends where |F| is below this many times its error
-#: bound tol.
-_NOISE_STOP = 1.0
-
 #: Newton steps polishing the nearest hit on the (s, t) system.
 _STEPS_POLISH = 2
 
@@ -206,13 +202,9 @@ _TANGENT_ULPS = 8.0
 #: Width of an unresolved root pair in z, in units of sqrt(tol / a).
 _PAIR_WIDTH = 4.0
 
-#: Levels by which a leaf's piece may be halved until F or F' is
-#: monotonic on it (:func:`_solve_piece`).
-_MAX_DEPTH = 3
-
 #: Crossing keys per leaf (next_crossing_bspline): two per monotonic
-#: interval of F, two intervals per piece of the deepest level.
-_KEYS_PER_LEAF = 4 << _MAX_DEPTH
+#: interval of F, at most six intervals.
+_KEYS_PER_LEAF = 16
 
 
 class BSplineData(LatheData):
@@ -469,8 +461,7 @@ def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
     return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
 
 
-def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False,
-                   noise=0.0) -> list:
+def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False) -> list:
     """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
     of one polynomial at once (``mask``: lanes that search it, ``None``:
     all), in one symbolic loop: every bracket takes the same steps as on its
@@ -481,9 +472,7 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
     ``strict``: a root is found exactly where ``f0 < 0`` and ``f1 < 0``
     differ (0 counts as positive), so that along a chain of brackets the
     found roots change the sign as often as the ends do (the parity rule of
-    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0.
-    ``noise``: a bound on the float32 error of ``c``: a point where ``|c|``
-    is below it is as good a root as float32 can tell, and ends the search."""
+    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0."""
     state, starts = [], []
     for x0, x1, f0, f1, mask in brackets:
         if strict:
@@ -507,7 +496,7 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
         return todo & (k < steps)
 
     def step(k, state):
-        return k + 1, [_newton_step(c, dc, bracket, neg0, noise)
+        return k + 1, [_newton_step(c, dc, bracket, neg0)
                        for bracket, (_, neg0) in zip(state, starts, strict=True)]
 
     _, state = dr.while_loop((mi.UInt32(0), state), pending, step)
@@ -518,7 +507,7 @@ def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool =
     return out
 
 
-def _newton_step(c: list, dc: list, bracket: tuple, neg0, noise) -> tuple:
+def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
     """One safeguarded Newton step of :func:`_bracket_roots` on one bracket
     state (the order of its fields is documented there)."""
     a, b, x, dx_old, dx, done, best_x, best_f = bracket
@@ -534,7 +523,7 @@ def _newton_step(c: list, dc: list, bracket: tuple, neg0, noise) -> tuple:
     # Converged: an exact zero, or a Newton step below float32 resolution of
     # t (checked first: the test below would then pick bisection and jump
     # away from the root).
-    done = done | (dr.abs(f) <= dr.maximum(_T_RESOLUTION * dr.abs(df), noise))
+    done = done | (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
     # Newton unless it leaves [a, b] or converges slower than bisection.
     xn = x - f / df
     newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
@@ -544,6 +533,29 @@ def _newton_step(c: list, dc: list, bracket: tuple, neg0, noise) -> tuple:
     last = ~done & newton & (dr.abs(f) <= _T_FINAL * dr.abs(df))
     best_x = dr.select(last, xn, best_x)
     return a, b, dr.select(done, x, x_new), dx, x_new - x, done | last, best_x, best_f
+
+
+def _isolate_critical(derivs: list, lo, hi) -> list:
+    """Sorted critical points of ``derivs[0]`` (degree k) on [lo, hi]: the
+    roots of its derivative, found level by level from the linear
+    ``derivs[-1]`` up. ``derivs[j]`` is the j-th derivative of ``derivs[0]``.
+    Missing points are filled with interval ends (harmless: they only split a
+    monotonic interval). Returns k - 1 values."""
+    # The root of the linear derivs[-1] is the critical point of derivs[-2].
+    lin = derivs[-1]
+    x = dr.select(lin[1] != 0, -lin[0] / lin[1], hi)
+    x = dr.select(dr.isfinite(x), x, hi)
+    crit = [dr.clip(x, lo, hi)]
+    # Levels of degree 2 .. k-1: each turns its critical points into its
+    # roots, which are the critical points of the level above.
+    for level in range(len(derivs) - 2, 0, -1):
+        c = derivs[level]
+        dc = derivs[level + 1]
+        xs = [lo] + crit + [hi]
+        fs = [_polyval(c, xk) for xk in xs]
+        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
+        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
+    return crit
 
 
 # ---------------------------------------------------------------------------
@@ -620,6 +632,23 @@ def _into_box(ray: _Ray, box, s):
     return best_s
 
 
+@dr.syntax
+def _kept_in_box(ray: _Ray, box, s):
+    """:func:`_into_box` where ``s`` is not already a point at which
+    :func:`_box_enter` meets the box (the interval ``[s, s]``; every
+    interval of ``s`` holding it meets it then too, as that test is
+    monotonic): a packet whose crossings all lie in their boxes (nearly
+    always) skips it."""
+    zl = (box.z - ray.o.z) * ray.inv_dz
+    zh = (box.w - ray.o.z) * ray.inv_dz
+    e = s - ray.s_star
+    r2 = dr.fma(ray.a, e * e, ray.r0sq)
+    inside = (s >= dr.minimum(zl, zh)) & (s <= dr.maximum(zl, zh)) & (r2 <= box.x * box.x) & (r2 >= box.y)
+    if ~inside:
+        s = _into_box(ray, box, s)
+    return s
+
+
 def _bezier_square(p: list) -> list:
     """Bernstein coefficients (degree 6) of the square of a Bezier cubic:
     ``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i p_j``."""
@@ -675,23 +704,6 @@ def _bezier_to_power(b) -> list:
     ``b`` (a Vector4f)."""
     d1, d2, d3 = b.y - b.x, b.z - b.y, b.w - b.z
     return [b.x, 3.0 * d1, 3.0 * (d2 - d1), (d3 - d2) - (d2 - d1)]
-
-
-def _de_casteljau(b: list, x) -> tuple[list, list]:
-    """Bernstein coefficients of the polynomial with coefficients ``b`` on
-    [0, 1] restricted to [0, x] and to [x, 1] (de Casteljau's algorithm)."""
-    left, right, row = [b[0]], [b[-1]], list(b)
-    while len(row) > 1:
-        row = [dr.fma(x, row[i + 1] - row[i], row[i]) for i in range(len(row) - 1)]
-        left.append(row[0])
-        right.append(row[-1])
-    return left, right[::-1]
-
-
-def _bernstein_piece(b: list, x0, x1) -> list:
-    """Bernstein coefficients of the polynomial with coefficients ``b`` on
-    [0, 1] restricted to [x0, x1] (``0 <= x0 < x1``)."""
-    return _de_casteljau(_de_casteljau(b, x1)[0], x0 / x1)[1]
 
 
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
@@ -808,7 +820,7 @@ def _interval_roots(lf: _Leaf, intervals: list) -> list:
     mask)`` where it is monotonic (values ``f0``, ``f1`` at the ends), for
     :func:`_take_interval`: one loop for all (:func:`_bracket_roots`), a
     root where the signs of the ends differ (strictly)."""
-    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True, noise=_NOISE_STOP * lf.tol)
+    return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True)
 
 
 def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, key,
@@ -817,8 +829,8 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, k
     (values ``f0``, ``f1`` at the ends; ``root``: from
     :func:`_interval_roots`), offered to ``best`` (:func:`_offer`) with the
     keys ``key`` and ``key + 1``. ``crit0``, ``crit1``: whether the lower,
-    upper end is a critical point of ``F`` found inside the piece (see
-    :func:`_solve_piece`), not the end of a piece.
+    upper end may be a critical point of ``F`` inside the leaf (False where
+    it is known not to be one).
 
     Parity first: along the leaf's intervals ``f1`` of one is ``f0`` of the
     next, and the leaf's first and last values are ``F`` at its joints,
@@ -879,7 +891,7 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, k
     first = dr.select(steep, s_z, dr.select(take1, s1, s2))
     second = dr.select(steep, s_z, dr.select(both, s2, first))
     if ray.mode == "keyed":
-        first, second = _into_box(ray, lf.box, first), _into_box(ray, lf.box, second)
+        first, second = _kept_in_box(ray, lf.box, first), _kept_in_box(ray, lf.box, second)
     best = _offer(best, ray, first, u, lf.leaf, key, m & (found | touching))
     return _offer(best, ray, second, u, lf.leaf, key + 1, touching)
 
@@ -897,71 +909,59 @@ def _solve_leaf(data: BSplineData, node, leaf, ray: _Ray, best: _Best, m) -> _Be
     return best
 
 
-@dr.syntax
-def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
-    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed: the
-    leaf's pieces (:func:`_solve_piece`) from ``u = 0`` to 1, each starting
-    with the value of ``F`` where the one before ended (the parity rule of
-    :func:`_take_interval`)."""
-    pos = mi.UInt32(0)     # the current piece is [pos, pos + 1] / 2^level ...
-    level = mi.UInt32(0)   # ... of the leaf's parameter u
-    f0 = mi.Float(lf.f0)   # F at the piece's start (sign: _side)
-    active = mi.Bool(m)    # lanes with pieces left
-    while active:
-        best, pos, level, f0, active = _solve_piece(lf, ray, best, pos, level, f0, active)
+def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
+    """General leaf: all critical points of F by the derivative chain, then
+    its six monotonic intervals (the leaf's ends valued at its joints)."""
+    lo, hi = mi.Float(0.0), mi.Float(1.0)
+    derivs = [lf.F, lf.dF]
+    for _ in range(4):
+        derivs.append(_polyder(derivs[-1]))
+    xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
+    fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
+    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
+    for slot, (interval, root) in enumerate(zip(intervals, _interval_roots(lf, intervals), strict=True)):
+        best = _take_interval(lf, ray, *interval[:4], root, best, m, lf.key + 2 * slot, True, True)
     return best
 
 
 @dr.syntax
-def _solve_piece(lf: _Leaf, ray: _Ray, best: _Best, pos, level, f0, active):
-    """One step of :func:`_solve_body`: the crossings on the piece
-    ``[pos, pos + 1] / 2^level`` of the leaf (lanes ``active``; ``f0``: F at
-    its start), or the piece halved. Returns ``(best, pos, level, f0,
-    active)`` for the next piece.
-
-    The Bernstein coefficients of ``F`` on the piece (the leaf's own, or
-    de Casteljau's on a part of it) bound those of ``F'`` and ``F''`` (their
-    first and second differences, with errors below 2 tol and 4 tol). Where
-    ``F'`` keeps its sign, ``F`` is monotonic on the piece (most leaves): one
-    interval, no tangent. Else where ``F''`` keeps its sign, ``F`` has at
-    most one critical point ``c`` there and at most two roots, on [x0, c]
-    and [c, x1]. Else the piece is halved, down to ``_MAX_DEPTH`` levels
-    (a piece still not that simple, ``F`` with a critical point next to an
-    inflection, is taken as such: its crossings keep their parity, but a
-    pair of close roots there may go unseen)."""
-    width = 1.0 / mi.Float(mi.UInt32(1) << level)
-    x0 = mi.Float(pos) * width
-    x1 = x0 + width          # exact: width is a power of 2
-    Gb = lf.Gb               # Bernstein coefficients of F on the piece
-    if active & (level > 0):
-        Gb = _bernstein_piece(lf.Gb, x0, x1)
+def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
+    """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
+    # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
+    # first and second differences of those of F, with errors below 2 tol
+    # and 4 tol.
+    Gb, tol = lf.Gb, lf.tol
     db = [Gb[k + 1] - Gb[k] for k in range(6)]
-    mono = _one_sign(db, 2.0 * lf.tol)
-    simple = mono | _one_sign([db[k + 1] - db[k] for k in range(5)], 4.0 * lf.tol)
-    deeper = active & ~simple & (level < _MAX_DEPTH)
-    here = active & ~deeper  # lanes that solve this piece
-    f1 = dr.select(x1 < 1.0, _value(lf, ray, x1), lf.f1)
-    c = mi.Float(x1)         # the critical point (x1: none) ...
-    f_c = mi.Float(f1)       # ... F there
-    inner = mi.Bool(False)   # ... and whether there is one
-    if here & ~mono:
-        ddF = _polyder(lf.dF)
-        c, inner = _bracket_root(lf.dF, ddF, x0, x1, _polyval(lf.dF, x0), _polyval(lf.dF, x1),
-                                 _STEPS_CRIT)
-        inner &= here & ~mono
-        c = dr.select(inner, c, x1)
-        f_c = dr.select(inner, _value(lf, ray, c), f1)
-    first, second = _interval_roots(lf, [(x0, c, f0, f_c, here), (c, x1, f_c, f1, inner)])
-    key = lf.key + (pos << (_MAX_DEPTH - level)) * 4
-    best = _take_interval(lf, ray, x0, c, f0, f_c, first, best, here, key, False, inner)
-    if inner:
-        best = _take_interval(lf, ray, c, x1, f_c, f1, second, best, inner, key + 2, inner)
-    # The next piece: the first half of this one, or the one after it (up
-    # as many levels as it ends a first half)
-    pos = dr.select(deeper, 2 * pos, pos + 1)
-    level = dr.select(deeper, level + 1, level)
-    up = dr.select(here, dr.minimum(dr.tzcnt(pos), level), 0)
-    return best, pos >> up, level - up, dr.select(here, f1, f0), active & ~(here & (x1 >= 1.0))
+    mono = _one_sign(db, 2.0 * tol)
+    simple = mono | _one_sign([db[k + 1] - db[k] for k in range(5)], 4.0 * tol)
+    # F' keeps its sign: F is monotonic on [0, 1] (most leaves), one
+    # interval, and no tangent. Else F'' keeps its sign: F is convex or
+    # concave. Where its ends differ in sign (as F has them, beyond its
+    # error: _side may have made one end positive, and an end within noise
+    # of 0 may be a root of either sign with another one inside) it has one
+    # root: one interval again. Else it has at most one critical point c
+    # (none: c = 1) and zero or two roots (or a tangent), on [0, c] and
+    # [c, 1]; packets without such a lane skip that work.
+    fast = m & simple
+    across = (lf.f0 < 0) != (lf.f1 < 0)
+    across &= ((Gb[0] < -tol) & (Gb[6] > tol)) | ((Gb[0] > tol) & (Gb[6] < -tol))
+    split = fast & ~mono & ~across
+    c = mi.Float(1.0)            # the critical point (1: none)
+    f_c = mi.Float(lf.f1)        # F(c)
+    if split:
+        c, _ = _bracket_root(lf.dF, _polyder(lf.dF), mi.Float(0.0), mi.Float(1.0), lf.dF[0],
+                             sum(lf.dF[1:], lf.dF[0]), _STEPS_CRIT)
+        f_c = _value(lf, ray, c)
+    first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.f0, f_c, fast),
+                                         (c, mi.Float(1.0), f_c, lf.f1, split)])
+    best = _take_interval(lf, ray, mi.Float(0.0), c, lf.f0, f_c, first, best, fast, lf.key, False, split)
+    if split:
+        best = _take_interval(lf, ray, c, mi.Float(1.0), f_c, lf.f1, second, best, split, lf.key + 2,
+                              True, True)
+    slow = m & ~simple
+    if slow:
+        best = _solve_chain(lf, ray, best, slow)
+    return best
 
 
 @dr.syntax
