@@ -540,21 +540,43 @@ def _isolate_critical(derivs: list, lo, hi) -> list:
     roots of its derivative, found level by level from the linear
     ``derivs[-1]`` up. ``derivs[j]`` is the j-th derivative of ``derivs[0]``.
     Missing points are filled with interval ends (harmless: they only split a
-    monotonic interval). Returns k - 1 values."""
+    monotonic interval). Returns k - 1 values.
+
+    One symbolic loop runs the levels: each level's polynomial is padded
+    with zero coefficients to the degree of the last (which changes no
+    value), its brackets likewise with empty ones at ``hi``, so that one
+    search of k - 1 brackets serves all levels: a much shorter kernel than
+    a search per level (this runs seldom, but its code slows the rest)."""
     # The root of the linear derivs[-1] is the critical point of derivs[-2].
     lin = derivs[-1]
     x = dr.select(lin[1] != 0, -lin[0] / lin[1], hi)
     x = dr.select(dr.isfinite(x), x, hi)
-    crit = [dr.clip(x, lo, hi)]
-    # Levels of degree 2 .. k-1: each turns its critical points into its
-    # roots, which are the critical points of the level above.
-    for level in range(len(derivs) - 2, 0, -1):
-        c = derivs[level]
-        dc = derivs[level + 1]
-        xs = [lo] + crit + [hi]
+    width = len(derivs[1])  # coefficients of the last level's polynomial
+
+    def padded(c: list) -> list:
+        return list(c) + [mi.Float(0.0)] * (width - len(c))
+
+    levels = {j: (padded(derivs[j]), padded(derivs[j + 1])) for j in range(1, len(derivs) - 1)}
+
+    def level_poly(j):
+        """The polynomial of level ``j`` and its derivative (padded)."""
+        c, dc = levels[len(derivs) - 2]
+        for level in range(len(derivs) - 3, 0, -1):
+            c = [dr.select(j == level, p, q) for p, q in zip(levels[level][0], c, strict=True)]
+            dc = [dr.select(j == level, p, q) for p, q in zip(levels[level][1], dc, strict=True)]
+        return c, dc
+
+    def step(j, crit):
+        # Level j turns its critical points into its roots, the critical
+        # points of level j - 1.
+        c, dc = level_poly(j)
+        xs = [lo] + crit[:width - 2] + [hi]
         fs = [_polyval(c, xk) for xk in xs]
-        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
-        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
+        brackets = [(xs[k], xs[k + 1], fs[k], fs[k + 1], None) for k in range(len(xs) - 1)]
+        return j - 1, [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
+
+    crit = [dr.clip(x, lo, hi)] + [mi.Float(hi) for _ in range(width - 2)]
+    _, crit = dr.while_loop((mi.UInt32(len(derivs) - 2), crit), lambda j, crit: j > 0, step)
     return crit
 
 
