@@ -940,10 +940,22 @@ def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
         derivs.append(_polyder(derivs[-1]))
     xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
     fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
-    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
-    for slot, (interval, root) in enumerate(zip(intervals, _interval_roots(lf, intervals), strict=True)):
-        best = _take_interval(lf, ray, *interval[:4], root, best, m, lf.key + 2 * slot, True, True)
-    return best
+
+    def pick(values: list, j):
+        """``values[j]`` (j the same on all lanes)."""
+        out = values[0]
+        for k in range(1, len(values)):
+            out = dr.select(j == k, values[k], out)
+        return out
+
+    def step(j, best):
+        # Interval j: one root search and its crossings (a loop over the
+        # intervals: a shorter kernel than six of each)
+        x0, x1, f0, f1 = pick(xs[:-1], j), pick(xs[1:], j), pick(fs[:-1], j), pick(fs[1:], j)
+        root = _interval_roots(lf, [(x0, x1, f0, f1, m)])[0]
+        return j + 1, _take_interval(lf, ray, x0, x1, f0, f1, root, best, m, lf.key + 2 * j, True, True)
+
+    return dr.while_loop((mi.UInt32(0), best), lambda j, best: j < len(xs) - 1, step)[1]
 
 
 @dr.syntax
