@@ -47,7 +47,10 @@ and stores its cubics in that local parameter, both in power form and as
 Bernstein (Bezier) control points, plus an exact, padded annular bounding
 box. Its first and last control points are its joints: one float32 point per
 joint, stored bit for bit alike in the two leaves that meet there (also
-where segments meet, and where a closed curve closes).
+where segments meet, and where a closed curve closes). The kernel reads only
+the control points (two loads of four floats; the power form follows from
+them in a few operations), and a crossing carries its leaf and ``u``: the
+segment and its ``t`` are read once per ray, for the crossing taken.
 
 Joints: parity first. A ray aimed at a joint may, after float32 rounding,
 find a root on both leaves or on neither. Each leaf therefore first fixes
@@ -101,19 +104,23 @@ polynomial. Leaves are short, so the chain can mostly stop early: when the
 Bernstein coefficients of ``F'`` (first differences of those of ``F``) share
 a sign beyond their error bound, ``F`` is monotonic and one bracketed search
 suffices (most candidate leaves); else when those of ``F''`` (second
-differences) do, ``F`` has a single critical point and at most two roots:
-three searches. Only the remaining lanes (about 1%) run the full derivative
-chain (five levels, twenty searches). The extra work of each case sits in a
-symbolic ``if``, which packets without such a lane skip. Each
+differences) do, ``F`` is convex or concave: one search where its ends
+differ in sign beyond noise, else a single critical point and at most two
+roots: three searches. Only the remaining lanes (about 1%) run the full
+derivative chain (five levels, twenty searches). The extra work of each case
+sits in a symbolic ``if``, which packets without such a lane skip. Each
 bracketed root is found by safeguarded Newton steps (bisection when a step
 leaves the bracket or converges slowly; the answer is the evaluated point
-with the least ``|F|``), so no root with a sign change can be missed; the
-iteration count only limits precision; the steps run in a symbolic loop
-that ends once all lanes of a packet converged. The searches of one level
-(the brackets between the critical points of one derivative, the intervals
-of ``F``) share one loop, which gives shorter and faster LLVM code than a
-loop per bracket, with the same results. A critical point where ``|F|`` is
-below ``tol`` is a tangent (double) root: a grazing hit.
+with the least ``|F|``, or the point after a last Newton step small enough
+that the next would be below float32 resolution), so no root with a sign
+change can be missed; the iteration count only limits precision; the steps
+run in a symbolic loop that ends once all lanes of a packet converged. The
+fast cases' searches share one loop; the derivative chain runs its levels
+in one loop (each level's polynomial padded to one degree) and then its six
+intervals in another. Code size matters more than the work of these rare
+lanes: the LLVM code of the whole traversal gets slower with every inlined
+search, although most packets never run one. A critical point where
+``|F|`` is below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision: in float32 the coefficients of ``F`` would lose most of their
 digits to cancellation for a ray that starts far from the lathe, so the ray
