@@ -12,6 +12,9 @@ ray sets, each ``--rays`` rays, in the lathe's local frame:
 * ``inside``: rays from random points of the bounding cylinder in random
   directions.
 
+Kernels: nearest hit, shadow ray (``occl.``) and the first crossing of a
+walk (``walk``: ``next_crossing_*``, which the path tracer calls).
+
 Each kernel is compiled first, then all are timed in turn (``dr.eval`` +
 ``dr.sync_thread``), ``--repeat`` rounds; the table gives the median and
 the min-max. ``--module PATH`` loads another version of
@@ -26,6 +29,7 @@ time on one Dr.Jit thread: on a shared machine far steadier than wall time.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import time
 
@@ -129,17 +133,22 @@ def interleaved_times(kernels: dict, o, d, repeat: int, clock) -> dict:
 
 def kernel_table(K, bdata, pdata, baseline=None) -> dict:
     """The timed kernels: the B-spline kernel of module ``K`` (and, given
-    ``baseline = (module, data)``, that one's as well) and the polyline's,
-    nearest hit and shadow ray."""
+    ``baseline = (module, data)``, that one's as well) and the polyline's:
+    nearest hit, shadow ray (``occl.``) and the first crossing of a walk
+    (``walk``, the query of the renders' path tracer)."""
     inf, on = mi.Float(dr.inf), mi.Bool(True)
-    kernels = {"bspline": lambda o, d: K.intersect_bspline(bdata, o, d, inf, on)}
-    if baseline:
-        kernels["baseline"] = lambda o, d: baseline[0].intersect_bspline(baseline[1], o, d, inf, on)
-    kernels["polyline31"] = lambda o, d: P.intersect_polyline(pdata, o, d, inf, on)
-    kernels["bspline occl."] = lambda o, d: K.occluded_bspline(bdata, o, d, inf, on)
-    if baseline:
-        kernels["baseline occl."] = lambda o, d: baseline[0].occluded_bspline(baseline[1], o, d, inf, on)
-    kernels["polyline31 occl."] = lambda o, d: P.occluded_polyline(pdata, o, d, inf, on)
+    splines = [("bspline", K, bdata)] + ([("baseline", *baseline)] if baseline else [])
+    kernels = {}
+    for suffix, spline_fn, poly_fn in (
+            ("", lambda M, b, o, d: M.intersect_bspline(b, o, d, inf, on),
+             lambda o, d: P.intersect_polyline(pdata, o, d, inf, on)),
+            (" occl.", lambda M, b, o, d: M.occluded_bspline(b, o, d, inf, on),
+             lambda o, d: P.occluded_polyline(pdata, o, d, inf, on)),
+            (" walk", lambda M, b, o, d: M.next_crossing_bspline(b, o, d, inf, on)[0],
+             lambda o, d: P.next_crossing_polyline(pdata, o, d, inf, on)[0])):
+        for name, module, data in splines:
+            kernels[name + suffix] = functools.partial(spline_fn, module, data)
+        kernels["polyline31" + suffix] = poly_fn
     return kernels
 
 
@@ -190,7 +199,7 @@ def main() -> None:
         medians = {k: float(np.median(t)) for k, (t, _) in results.items()}
         for kname, (times, hits) in results.items():
             t = medians[kname]
-            ours = medians["bspline occl." if kname.endswith("occl.") else "bspline"]
+            ours = medians["bspline" + kname[kname.find(" "):] if " " in kname else "bspline"]
             ratio = "" if kname.startswith("bspline") else f"{ours / t:13.3f}x"
             spread = f"{t * 1e3:.1f} ({min(times) * 1e3:.1f}-{max(times) * 1e3:.1f})"
             print(f"{name:<10}{kname:<18}{spread:>22}{len(org) / t / 1e6:>9.2f}{hits:>7.3f}{ratio:>14}",

@@ -47,7 +47,10 @@ and stores its cubics in that local parameter, both in power form and as
 Bernstein (Bezier) control points, plus an exact, padded annular bounding
 box. Its first and last control points are its joints: one float32 point per
 joint, stored bit for bit alike in the two leaves that meet there (also
-where segments meet, and where a closed curve closes).
+where segments meet, and where a closed curve closes). The kernel reads only
+the control points (two loads of four floats; the power form follows from
+them in a few operations), and a crossing carries its leaf and ``u``: the
+segment and its ``t`` are read once per ray, for the crossing taken.
 
 Joints: parity first. A ray aimed at a joint may, after float32 rounding,
 find a root on both leaves or on neither. Each leaf therefore first fixes
@@ -101,19 +104,23 @@ polynomial. Leaves are short, so the chain can mostly stop early: when the
 Bernstein coefficients of ``F'`` (first differences of those of ``F``) share
 a sign beyond their error bound, ``F`` is monotonic and one bracketed search
 suffices (most candidate leaves); else when those of ``F''`` (second
-differences) do, ``F`` has a single critical point and at most two roots:
-three searches. Only the remaining lanes (about 1%) run the full derivative
-chain (five levels, twenty searches). The extra work of each case sits in a
-symbolic ``if``, which packets without such a lane skip. Each
+differences) do, ``F`` is convex or concave: one search where its ends
+differ in sign beyond noise, else a single critical point and at most two
+roots: three searches. Only the remaining lanes (about 1%) run the full
+derivative chain (five levels, twenty searches). The extra work of each case
+sits in a symbolic ``if``, which packets without such a lane skip. Each
 bracketed root is found by safeguarded Newton steps (bisection when a step
 leaves the bracket or converges slowly; the answer is the evaluated point
-with the least ``|F|``), so no root with a sign change can be missed; the
-iteration count only limits precision; the steps run in a symbolic loop
-that ends once all lanes of a packet converged. The searches of one level
-(the brackets between the critical points of one derivative, the intervals
-of ``F``) share one loop, which gives shorter and faster LLVM code than a
-loop per bracket, with the same results. A critical point where ``|F|`` is
-below ``tol`` is a tangent (double) root: a grazing hit.
+with the least ``|F|``, or the point after a last Newton step small enough
+that the next would be below float32 resolution), so no root with a sign
+change can be missed; the iteration count only limits precision; the steps
+run in a symbolic loop that ends once all lanes of a packet converged. The
+fast cases' searches share one loop; the derivative chain runs its levels
+in one loop (each level's polynomial padded to one degree) and then its six
+intervals in another. Code size matters more than the work of these rare
+lanes: the LLVM code of the whole traversal gets slower with every inlined
+search, although most packets never run one. A critical point where
+``|F|`` is below ``tol`` is a tangent (double) root: a grazing hit.
 
 Precision: in float32 the coefficients of ``F`` would lose most of their
 digits to cancellation for a ray that starts far from the lathe, so the ray
@@ -188,6 +195,9 @@ _R0_REL_TOL = 1e-5
 
 #: Steps below this (about the float32 spacing near u = 1) end a root search.
 _T_RESOLUTION = 1e-7
+
+#: A Newton step below this ends a root search after it is taken.
+_T_FINAL = 1e-4
 
 #: Newton steps polishing the nearest hit on the (s, t) system.
 _STEPS_POLISH = 2
@@ -525,7 +535,11 @@ def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
     xn = x - f / df
     newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
     x_new = dr.select(newton, xn, 0.5 * (a + b))
-    return a, b, dr.select(done, x, x_new), dx, x_new - x, done, best_x, best_f
+    # A Newton step below _T_FINAL is the last one: the next would be of
+    # its square's order, below float32 resolution (saves an evaluation).
+    last = ~done & newton & (dr.abs(f) <= _T_FINAL * dr.abs(df))
+    best_x = dr.select(last, xn, best_x)
+    return a, b, dr.select(done, x, x_new), dx, x_new - x, done | last, best_x, best_f
 
 
 def _isolate_critical(derivs: list, lo, hi) -> list:
@@ -533,21 +547,43 @@ def _isolate_critical(derivs: list, lo, hi) -> list:
     roots of its derivative, found level by level from the linear
     ``derivs[-1]`` up. ``derivs[j]`` is the j-th derivative of ``derivs[0]``.
     Missing points are filled with interval ends (harmless: they only split a
-    monotonic interval). Returns k - 1 values."""
+    monotonic interval). Returns k - 1 values.
+
+    One symbolic loop runs the levels: each level's polynomial is padded
+    with zero coefficients to the degree of the last (which changes no
+    value), its brackets likewise with empty ones at ``hi``, so that one
+    search of k - 1 brackets serves all levels: a much shorter kernel than
+    a search per level (this runs seldom, but its code slows the rest)."""
     # The root of the linear derivs[-1] is the critical point of derivs[-2].
     lin = derivs[-1]
     x = dr.select(lin[1] != 0, -lin[0] / lin[1], hi)
     x = dr.select(dr.isfinite(x), x, hi)
-    crit = [dr.clip(x, lo, hi)]
-    # Levels of degree 2 .. k-1: each turns its critical points into its
-    # roots, which are the critical points of the level above.
-    for level in range(len(derivs) - 2, 0, -1):
-        c = derivs[level]
-        dc = derivs[level + 1]
-        xs = [lo] + crit + [hi]
+    width = len(derivs[1])  # coefficients of the last level's polynomial
+
+    def padded(c: list) -> list:
+        return list(c) + [mi.Float(0.0)] * (width - len(c))
+
+    levels = {j: (padded(derivs[j]), padded(derivs[j + 1])) for j in range(1, len(derivs) - 1)}
+
+    def level_poly(j):
+        """The polynomial of level ``j`` and its derivative (padded)."""
+        c, dc = levels[len(derivs) - 2]
+        for level in range(len(derivs) - 3, 0, -1):
+            c = [dr.select(j == level, p, q) for p, q in zip(levels[level][0], c, strict=True)]
+            dc = [dr.select(j == level, p, q) for p, q in zip(levels[level][1], dc, strict=True)]
+        return c, dc
+
+    def step(j, crit):
+        # Level j turns its critical points into its roots, the critical
+        # points of level j - 1.
+        c, dc = level_poly(j)
+        xs = [lo] + crit[:width - 2] + [hi]
         fs = [_polyval(c, xk) for xk in xs]
-        brackets = [(xs[j], xs[j + 1], fs[j], fs[j + 1], None) for j in range(len(xs) - 1)]
-        crit = [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
+        brackets = [(xs[k], xs[k + 1], fs[k], fs[k + 1], None) for k in range(len(xs) - 1)]
+        return j - 1, [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
+
+    crit = [dr.clip(x, lo, hi)] + [mi.Float(hi) for _ in range(width - 2)]
+    _, crit = dr.while_loop((mi.UInt32(len(derivs) - 2), crit), lambda j, crit: j > 0, step)
     return crit
 
 
@@ -625,6 +661,23 @@ def _into_box(ray: _Ray, box, s):
     return best_s
 
 
+@dr.syntax
+def _kept_in_box(ray: _Ray, box, s):
+    """:func:`_into_box` where ``s`` is not already a point at which
+    :func:`_box_enter` meets the box (the interval ``[s, s]``; every
+    interval of ``s`` holding it meets it then too, as that test is
+    monotonic): a packet whose crossings all lie in their boxes (nearly
+    always) skips it."""
+    zl = (box.z - ray.o.z) * ray.inv_dz
+    zh = (box.w - ray.o.z) * ray.inv_dz
+    e = s - ray.s_star
+    r2 = dr.fma(ray.a, e * e, ray.r0sq)
+    inside = (s >= dr.minimum(zl, zh)) & (s <= dr.maximum(zl, zh)) & (r2 <= box.x * box.x) & (r2 >= box.y)
+    if ~inside:
+        s = _into_box(ray, box, s)
+    return s
+
+
 def _bezier_square(p: list) -> list:
     """Bernstein coefficients (degree 6) of the square of a Bezier cubic:
     ``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i p_j``."""
@@ -675,6 +728,13 @@ def _one_sign(c: list, tol):
     return (lo > tol) | (hi < -tol)
 
 
+def _bezier_to_power(b) -> list:
+    """Ascending power coefficients of the Bezier cubic with control values
+    ``b`` (a Vector4f)."""
+    d1, d2, d3 = b.y - b.x, b.z - b.y, b.w - b.z
+    return [b.x, 3.0 * d1, 3.0 * (d2 - d1), (d3 - d2) - (d2 - d1)]
+
+
 def _visit(data: BSplineData, ray: _Ray, node, best, active):
     """One traversal step: ``(candidate, next node)``. A candidate is a leaf
     whose box the ray enters before ``best`` (:func:`_solve_leaf` tests its
@@ -695,30 +755,31 @@ def _visit(data: BSplineData, ray: _Ray, node, best, active):
 
 class _Best(metaclass=common.VariantStruct):
     """The crossings found so far on a ray: the first one in the ray's order
-    (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its curve
-    parameter ``u``, segment ``seg`` and crossing key ``key``, and ``count``,
-    the number of crossings (counting rays only)."""
+    (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its ``leaf`` and
+    parameter ``u`` there (the segment and its parameter follow once, at the
+    end of the traversal: :func:`_leaf_to_segment`) and crossing key
+    ``key``, and ``count``, the number of crossings (counting rays only)."""
 
-    _FIELDS = {"s": "Float", "u": "Float", "seg": "UInt32", "key": "UInt32", "count": "UInt32"}
+    _FIELDS = {"s": "Float", "u": "Float", "leaf": "UInt32", "key": "UInt32", "count": "UInt32"}
 
-    def __init__(self, s=None, u=None, seg=None, key=None, count=None) -> None:
+    def __init__(self, s=None, u=None, leaf=None, key=None, count=None) -> None:
         self.s = mi.Float(dr.inf) if s is None else s
         self.u = mi.Float(0.0) if u is None else u
-        self.seg = mi.UInt32(0) if seg is None else seg
+        self.leaf = mi.UInt32(0) if leaf is None else leaf
         self.key = mi.UInt32(0) if key is None else key
         self.count = mi.UInt32(0) if count is None else count
 
 
-def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
-    """``best`` with the crossing ``(s, key)`` at curve parameter ``t`` on
-    segment ``seg`` (lanes ``ok``) taken into account, as the ray's mode
+def _offer(best: _Best, ray: _Ray, s, u, leaf, key, ok) -> _Best:
+    """``best`` with the crossing ``(s, key)`` at parameter ``u`` of leaf
+    ``leaf`` (lanes ``ok``) taken into account, as the ray's mode
     says: ``nearest``, the least ``s`` after ``s_lo`` (ties: the first
     offered); ``keyed``, the least ``(s, key)`` after ``ray.after`` (ties in
     ``s`` broken by the key, so that a walk through a ray's crossings finds
     each once); ``count``, every crossing after ``s_lo``."""
     ok = ok & dr.isfinite(s)
     if ray.mode == "count":
-        return _Best(best.s, best.u, best.seg, best.key,
+        return _Best(best.s, best.u, best.leaf, best.key,
                      best.count + mi.UInt32(ok & (s > ray.s_lo) & (s < ray.s_max)))
     if ray.mode == "keyed":
         after_s, after_key = ray.after
@@ -728,29 +789,27 @@ def _offer(best: _Best, ray: _Ray, s, t, seg, key, ok) -> _Best:
     else:
         take = ok & (s > ray.s_lo) & (s < best.s)
         key = best.key  # unused: no work on the hot path
-    return _Best(dr.select(take, s, best.s), dr.select(take, t, best.u),
-                 dr.select(take, seg, best.seg), key, best.count)
+    return _Best(dr.select(take, s, best.s), dr.select(take, u, best.u),
+                 dr.select(take, leaf, best.leaf), key, best.count)
 
 
 class _Leaf:
-    """A candidate leaf's cubics (local parameter u), its placement in the
-    segment (t = t0 + h u), F in power form and its error bound, and the
-    first crossing key of the leaf (:func:`_offer`)."""
+    """A candidate leaf's cubics (local parameter u), F in power form and
+    its error bound, and the first crossing key of the leaf
+    (:func:`_offer`). Only the Bezier control points are read: the power
+    form follows from them in a few operations (fewer loads)."""
 
     def __init__(self, data: BSplineData, node, leaf, ray: _Ray, m):
         base = leaf * (_LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
-        Rp = dr.gather(mi.Vector4f, data.leaf, base + 2, m)
-        Zp = dr.gather(mi.Vector4f, data.leaf, base + 3, m)
-        meta = dr.gather(mi.Vector4f, data.leaf, base + 4, m)
-        self.t0, self.h, self.seg = meta.x, meta.y, mi.UInt32(meta.z)
+        self.leaf = leaf
         self.key = leaf * _KEYS_PER_LEAF
         if ray.mode == "keyed":
             # Crossings stay within the leaf's box (_into_box)
             self.box = dr.gather(mi.Vector4f, data.nodes, node, m)
-        self.R = [Rp.x, Rp.y, Rp.z, Rp.w]
-        self.Z = [Zp.x, Zp.y, Zp.z, Zp.w]
+        self.R = _bezier_to_power(Rb)
+        self.Z = _bezier_to_power(Zb)
         self.squared = _squared(data)  # R holds R^2 (eq. 20)
         self.Gb, self.tol = _hull(Rb, Zb, ray, self.squared)
         # F at the leaf's ends, from the joints it shares with its
@@ -793,12 +852,14 @@ def _interval_roots(lf: _Leaf, intervals: list) -> list:
     return _bracket_roots(lf.F, lf.dF, intervals, _STEPS_ROOT, strict=True)
 
 
-def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, slot: int,
-                   touch=True) -> _Best:
+def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, key,
+                   crit0=False, crit1=False) -> _Best:
     """The crossings of the ray on [x0, x1], where ``F`` is monotonic
     (values ``f0``, ``f1`` at the ends; ``root``: from
     :func:`_interval_roots`), offered to ``best`` (:func:`_offer`) with the
-    keys ``lf.key + 2 slot`` and ``+ 1``.
+    keys ``key`` and ``key + 1``. ``crit0``, ``crit1``: whether the lower,
+    upper end may be a critical point of ``F`` inside the leaf (False where
+    it is known not to be one).
 
     Parity first: along the leaf's intervals ``f1`` of one is ``f0`` of the
     next, and the leaf's first and last values are ``F`` at its joints,
@@ -810,15 +871,14 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     of a pair that float32 cannot resolve, else the same point twice): at
     the interval's upper end ``x1``, when ``|f1|`` is within float32 noise
     of 0 without a sign change (the lower end belongs to the interval
-    before), where ``x1`` is a critical point inside the leaf and
-    ``touch`` (False where ``F`` is monotonic on the leaf: no double root).
+    before), where ``x1`` is a critical point inside the leaf (``crit1``).
     (At a joint ``F`` within noise of 0 is mostly a crossing that float32
     cannot place on either leaf, which one of them reports; a tangent there
     counts as none.) See the module docstring for the choice of ``s``."""
     o, dz = ray.o, ray.d.z
     tol = lf.tol
     u, found = root
-    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & touch
+    tangent = ~found & (dr.abs(f1) <= tol) & (x1 > x0) & (x1 < 1.0) & crit1
     u = dr.select(found, u, x1)
     Rt = _polyval(lf.R, u)
     R2t = _by_form(lf.squared, lambda: Rt, lambda: Rt * Rt)  # R(t)^2
@@ -854,30 +914,15 @@ def _take_interval(lf: _Leaf, ray: _Ray, x0, x1, f0, f1, root, best: _Best, m, s
     near0 = dr.abs(f0) <= dr.abs(f1)  # the end nearer a root pair's centre
     centre = dr.select(near0, x0, x1)
     pair = found & unresolved & (dr.minimum(dr.abs(f0), dr.abs(f1)) <= tol) & (centre > 0) & (centre < 1)
+    pair &= dr.select(near0, crit0, crit1)
     above = (dZ > 0) == near0
     take1 = dr.select(pair, above != (dz >= 0), (e1 <= e2) | both)
     first = dr.select(steep, s_z, dr.select(take1, s1, s2))
     second = dr.select(steep, s_z, dr.select(both, s2, first))
     if ray.mode == "keyed":
-        first, second = _into_box(ray, lf.box, first), _into_box(ray, lf.box, second)
-    t = dr.fma(lf.h, u, lf.t0)
-    best = _offer(best, ray, first, t, lf.seg, lf.key + 2 * slot, m & (found | touching))
-    return _offer(best, ray, second, t, lf.seg, lf.key + (2 * slot + 1), touching)
-
-
-def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
-    """General leaf: all critical points of F by the derivative chain, then
-    its six monotonic intervals (the leaf's ends valued at its joints)."""
-    lo, hi = mi.Float(0.0), mi.Float(1.0)
-    derivs = [lf.F, lf.dF]
-    for _ in range(4):
-        derivs.append(_polyder(derivs[-1]))
-    xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
-    fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
-    intervals = [(xs[j], xs[j + 1], fs[j], fs[j + 1], m) for j in range(len(xs) - 1)]
-    for slot, (interval, root) in enumerate(zip(intervals, _interval_roots(lf, intervals), strict=True)):
-        best = _take_interval(lf, ray, *interval[:4], root, best, m, slot)
-    return best
+        first, second = _kept_in_box(ray, lf.box, first), _kept_in_box(ray, lf.box, second)
+    best = _offer(best, ray, first, u, lf.leaf, key, m & (found | touching))
+    return _offer(best, ray, second, u, lf.leaf, key + 1, touching)
 
 
 @dr.syntax
@@ -893,23 +938,55 @@ def _solve_leaf(data: BSplineData, node, leaf, ray: _Ray, best: _Best, m) -> _Be
     return best
 
 
+def _solve_chain(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
+    """General leaf: all critical points of F by the derivative chain, then
+    its six monotonic intervals (the leaf's ends valued at its joints)."""
+    lo, hi = mi.Float(0.0), mi.Float(1.0)
+    derivs = [lf.F, lf.dF]
+    for _ in range(4):
+        derivs.append(_polyder(derivs[-1]))
+    xs = [lo] + _isolate_critical(derivs, lo, hi) + [hi]
+    fs = [lf.f0] + [_value(lf, ray, x) for x in xs[1:-1]] + [lf.f1]
+
+    def pick(values: list, j):
+        """``values[j]`` (j the same on all lanes)."""
+        out = values[0]
+        for k in range(1, len(values)):
+            out = dr.select(j == k, values[k], out)
+        return out
+
+    def step(j, best):
+        # Interval j: one root search and its crossings (a loop over the
+        # intervals: a shorter kernel than six of each)
+        x0, x1, f0, f1 = pick(xs[:-1], j), pick(xs[1:], j), pick(fs[:-1], j), pick(fs[1:], j)
+        root = _interval_roots(lf, [(x0, x1, f0, f1, m)])[0]
+        return j + 1, _take_interval(lf, ray, x0, x1, f0, f1, root, best, m, lf.key + 2 * j, True, True)
+
+    return dr.while_loop((mi.UInt32(0), best), lambda j, best: j < len(xs) - 1, step)[1]
+
+
 @dr.syntax
 def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
     """:func:`_solve_leaf` on the lanes ``m`` that its hull test passed."""
     # Bernstein coefficients of F' and F'' (up to the factors 6 and 30):
     # first and second differences of those of F, with errors below 2 tol
     # and 4 tol.
-    Gb = lf.Gb
+    Gb, tol = lf.Gb, lf.tol
     db = [Gb[k + 1] - Gb[k] for k in range(6)]
-    ddb = [db[k + 1] - db[k] for k in range(5)]
-    mono = _one_sign(db, 2.0 * lf.tol)
-    simple = mono | _one_sign(ddb, 4.0 * lf.tol)
+    mono = _one_sign(db, 2.0 * tol)
+    simple = mono | _one_sign([db[k + 1] - db[k] for k in range(5)], 4.0 * tol)
     # F' keeps its sign: F is monotonic on [0, 1] (most leaves), one
-    # interval, and no tangent. Else F'' keeps its sign: F' is monotonic, F
-    # has at most one critical point c (none: c = 1) and at most two roots,
-    # on [0, c] and [c, 1]; packets without such a lane skip that work.
+    # interval, and no tangent. Else F'' keeps its sign: F is convex or
+    # concave. Where its ends differ in sign (as F has them, beyond its
+    # error: _side may have made one end positive, and an end within noise
+    # of 0 may be a root of either sign with another one inside) it has one
+    # root: one interval again. Else it has at most one critical point c
+    # (none: c = 1) and zero or two roots (or a tangent), on [0, c] and
+    # [c, 1]; packets without such a lane skip that work.
     fast = m & simple
-    split = fast & ~mono
+    across = (lf.f0 < 0) != (lf.f1 < 0)
+    across &= ((Gb[0] < -tol) & (Gb[6] > tol)) | ((Gb[0] > tol) & (Gb[6] < -tol))
+    split = fast & ~mono & ~across
     c = mi.Float(1.0)            # the critical point (1: none)
     f_c = mi.Float(lf.f1)        # F(c)
     if split:
@@ -918,9 +995,10 @@ def _solve_body(lf: _Leaf, ray: _Ray, best: _Best, m) -> _Best:
         f_c = _value(lf, ray, c)
     first, second = _interval_roots(lf, [(mi.Float(0.0), c, lf.f0, f_c, fast),
                                          (c, mi.Float(1.0), f_c, lf.f1, split)])
-    best = _take_interval(lf, ray, mi.Float(0.0), c, lf.f0, f_c, first, best, fast, 0, ~mono)
+    best = _take_interval(lf, ray, mi.Float(0.0), c, lf.f0, f_c, first, best, fast, lf.key, False, split)
     if split:
-        best = _take_interval(lf, ray, c, mi.Float(1.0), f_c, lf.f1, second, best, split, 1)
+        best = _take_interval(lf, ray, c, mi.Float(1.0), f_c, lf.f1, second, best, split, lf.key + 2,
+                              True, True)
     slow = m & ~simple
     if slow:
         best = _solve_chain(lf, ray, best, slow)
@@ -949,11 +1027,28 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
         hit |= best.s < ray.s_max
         node = dr.select(cand, node + 1, node)
     valid = best.s < ray.s_max
-    s, u = best.s, best.u
+    s = best.s
+    seg, u = _leaf_to_segment(data, best, valid)
     if not shadow:
-        s, u = _polish(data, ray, s, u, best.seg, valid)
+        if valid:  # (a packet without a hit skips it)
+            s, u = _polish(data, ray, s, u, seg, valid)
     t = dr.select(valid, (s + ray.s_enter) * ray.t_scale, dr.inf)
-    return BSplineHit(t=t, seg=best.seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
+    return BSplineHit(t=t, seg=seg, u=dr.clip(u, 0.0, 1.0), valid=valid), best
+
+
+def _leaf_to_segment(data: BSplineData, best: _Best, active):
+    """The segment of the crossing ``best`` and its parameter there, ``t =
+    t0 + h u`` (the leaf's placement in its segment)."""
+    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 4, active)
+    return mi.UInt32(meta.z), dr.fma(meta.y, best.u, meta.x)
+
+
+def _segment_cubics(data: BSplineData, seg, active) -> tuple[list, list]:
+    """Power coefficients of ``R`` (or ``R^2``) and ``Z`` of segment
+    ``seg``: two loads of four adjacent floats."""
+    R = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4), active)
+    Z = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4) + 1, active)
+    return [R.x, R.y, R.z, R.w], [Z.x, Z.y, Z.z, Z.w]
 
 
 def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
@@ -966,9 +1061,7 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     these residuals are not. A step is kept only when the Jacobian is well
     conditioned and it stays small and on the segment (grazing hits keep the
     root-finder's answer)."""
-    base = seg * _STRIDE
-    R = [dr.gather(mi.Float, data.seg, base + k, active) for k in range(4)]
-    Z = [dr.gather(mi.Float, data.seg, base + 4 + k, active) for k in range(4)]
+    R, Z = _segment_cubics(data, seg, active)
     o, dh = ray.o, ray.d
     squared = _squared(data)
     for _ in range(_STEPS_POLISH):
@@ -1074,9 +1167,7 @@ def bspline_geometry(data: BSplineData, p: mi.Point3f, seg: mi.UInt32,
     segment's chord gives its limit direction. ``uv = (azimuth / 2 pi, (seg +
     u) / n_seg)``.
     """
-    base = seg * _STRIDE
-    R = [dr.gather(mi.Float, data.seg, base + k) for k in range(4)]
-    Z = [dr.gather(mi.Float, data.seg, base + 4 + k) for k in range(4)]
+    R, Z = _segment_cubics(data, seg, True)
     Rt, dR = _polyval_d(R, u)  # unit frame (kernels/common.py)
     _, dZ = _polyval_d(Z, u)
     tan_r, tan_z = dR, dZ
