@@ -384,14 +384,15 @@ class _Stack:
         ray enters it, the new stack depth (``far`` pushed where ``push``)
         and whether a node is left. ``depth`` must start as an array of the
         rays' width: from a scalar 0, Dr.Jit 1.5 read back wrong entries."""
-        self.node.write(far, depth, push)
-        self.s.write(far_s, depth, push)
-        pop = ~go & (depth > 0)
+        slot = dr.minimum(depth, BVH_DEPTH - 1)
+        self.node[slot] = far   # kept only where pushed (the slot is free)
+        self.s[slot] = far_s
         top = dr.maximum(depth, 1) - 1
-        node = dr.select(go, near, self.node.read(top, pop))
-        node_s = dr.select(go, near_s, self.s.read(top, pop))
+        node = dr.select(go, near, self.node[top])
+        node_s = dr.select(go, near_s, self.s[top])
+        more = go | (depth > 0)
         depth = dr.select(go, depth + mi.UInt32(push), top)
-        return node, node_s, depth, go | pop
+        return node, node_s, depth, more
 
 
 def _children(ray: _Ray, node, link, box0, box1, s_best, inner):
