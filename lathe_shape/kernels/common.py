@@ -442,12 +442,16 @@ class LatheRay:
         self.inv_dz = inv_dz
         self.oz_inv_dz = self.o.z * inv_dz
         # The same quadratic as r(s)^2 = (sqrt(a) s - x_axis)^2 + r2_axis
-        # (sum of squares: no cancellation; see enter_child_box), r2_axis
-        # the line's smallest r^2; a ray parallel to the axis has r^2 = c
+        # (a sum of squares: no cancellation; see enter_child_box), r2_axis
+        # the line's smallest r^2, reached at s_axis = x_axis / sqrt(a). A
+        # ray parallel to the axis has r^2 = c, and its cylinder intervals
+        # are (nearly) infinite: 1 / sqrt(a) is taken as 1e30.
         self.sqrt_a = dr.sqrt(a_xy)
         inv_sqrt_a = dr.select(a_xy > 0, dr.rcp(self.sqrt_a), 0)
         self.x_axis = -self.b * inv_sqrt_a
         self.r2_axis = dr.select(a_xy > 0, dr.square(self.cross * inv_sqrt_a), self.c)
+        self.s_axis = self.x_axis * inv_sqrt_a
+        self.inv_sqrt_a = dr.select(a_xy > 0, inv_sqrt_a, 1e30)
         # BVH copy (see threaded_bvh): lower child first when going up,
         # outer child first when moving towards the axis
         copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b <= 0, 0, 1)
@@ -513,22 +517,22 @@ def enter_annular_box(ray: LatheRay, zmin, zmax, r_lo, r_hi, rmin2, s_best):
 def enter_child_box(ray: LatheRay, box: mi.Vector4f, s_best: mi.Float) -> tuple[mi.Bool, mi.Float]:
     """Whether the ray meets the annular box ``box = (rmax^2, rmin2, zmin,
     zmax)`` (``rmin2`` as :func:`box_rmin2`) at some ``s`` in ``(ray.s_lo,
-    s_best)``, and where it enters the box's slab (a lower bound of where it
-    enters the box).
+    s_best)``, and where it enters the box's slab and cylinder ``r <= rmax``
+    (a lower bound of where it enters the box).
 
-    No quadratic to solve: over the slab interval, the convex ``r(s)^2 =
-    (sqrt(a) s - x_axis)^2 + r2_axis`` is smallest at the point nearest to
-    ``s = x_axis / sqrt(a)`` and largest at an end; the box is entered when
-    that range meets ``[rmin^2, rmax^2]``. Each value is a sum of squares,
-    accurate also for rays through the axis."""
+    With ``r(s)^2 = (sqrt(a) s - x_axis)^2 + r2_axis`` the cylinder's
+    interval is ``s_axis -+ sqrt(rmax^2 - r2_axis) / sqrt(a)`` (no
+    quadratic to solve, no cancellation: ``r2_axis`` is the line's own
+    smallest ``r^2``); on its part in the slab the convex ``r(s)^2`` is
+    largest at an end, which must reach ``rmin^2``."""
     zl = dr.fma(box.z, ray.inv_dz, -ray.oz_inv_dz)
     zh = dr.fma(box.w, ray.inv_dz, -ray.oz_inv_dz)
-    lo = dr.maximum(dr.minimum(zl, zh), ray.s_lo)
-    hi = dr.minimum(dr.maximum(zl, zh), s_best)
+    half = dr.sqrt(dr.maximum(box.x - ray.r2_axis, 0)) * ray.inv_sqrt_a
+    lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), ray.s_lo), ray.s_axis - half)
+    hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), s_best), ray.s_axis + half)
     x_lo = dr.fma(ray.sqrt_a, lo, -ray.x_axis)
     x_hi = dr.fma(ray.sqrt_a, hi, -ray.x_axis)
-    x_near = dr.minimum(dr.maximum(x_lo, 0), x_hi)
-    below_max = dr.fma(x_near, x_near, ray.r2_axis) <= box.x
+    below_max = ray.r2_axis <= box.x
     above_min = (dr.fma(x_lo, x_lo, ray.r2_axis) >= box.y) | (dr.fma(x_hi, x_hi, ray.r2_axis) >= box.y)
     return (lo <= hi) & below_max & above_min, lo
 
