@@ -378,20 +378,28 @@ class _Stack:
         self.node = dr.alloc_local(mi.UInt32, BVH_DEPTH)
         self.s = dr.alloc_local(mi.Float, BVH_DEPTH)
 
-    def advance(self, depth, go, near, near_s, push, far, far_s):
+    @dr.syntax
+    def advance(self, depth, s_best, go, near, near_s, push, far, far_s):
         """After a visit: ``(node, node_s, depth, more)``, the node to visit
-        next (``near`` where ``go``, else the top of the stack), where the
-        ray enters it, the new stack depth (``far`` pushed where ``push``)
-        and whether a node is left. ``depth`` must start as an array of the
-        rays' width: from a scalar 0, Dr.Jit 1.5 read back wrong entries."""
+        next (``near`` where ``go``, else the top of the stack that the ray
+        enters before ``s_best``), where the ray enters it, the new stack
+        depth (``far`` pushed where ``push``) and whether a node is left.
+        ``depth`` must start as an array of the rays' width: from a scalar
+        0, Dr.Jit 1.5 read back wrong entries."""
         slot = dr.minimum(depth, BVH_DEPTH - 1)
         self.node[slot] = far   # kept only where pushed (the slot is free)
         self.s[slot] = far_s
-        top = dr.maximum(depth, 1) - 1
-        node = dr.select(go, near, self.node[top])
-        node_s = dr.select(go, near_s, self.s[top])
-        more = go | (depth > 0)
-        depth = dr.select(go, depth + mi.UInt32(push), top)
+        node, node_s = mi.UInt32(near), mi.Float(near_s)
+        more = mi.Bool(go)
+        depth = dr.select(push, depth + 1, depth)
+        pop = ~go & (depth > 0)
+        # Entries that the ray enters after the best hit so far are dropped
+        while pop:
+            depth -= 1
+            node = self.node[depth]
+            node_s = self.s[depth]
+            more = node_s <= s_best
+            pop = ~more & (depth > 0)
         return node, node_s, depth, more
 
 
@@ -614,15 +622,14 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
     found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
     while more:
-        # A node pushed before the best hit so far moved in front of it is skipped
         children, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
-            data, ray, node, _Key(s_best, key if keyed else None), more & (node_s <= s_best))
+            data, ray, node, _Key(s_best, key if keyed else None), more)
         s_best = dr.select(hit, s_hit, s_best)
         key = dr.select(hit, key_hit, key)
         u = dr.select(hit, u_hit, u)
         seg = dr.select(hit, seg_hit, seg)
         found |= hit
-        node, node_s, depth, more = stack.advance(depth, *children)
+        node, node_s, depth, more = stack.advance(depth, s_best, *children)
 
     t = ray.s_enter + s_best
     valid = found & (t > 0) & (t < ray.tmax)
@@ -694,7 +701,7 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
         children, s_hit, _, _, hit, _, _ = _visit(data, ray, node, _Key(ray.s_hi), more)
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
-        node, _, depth, more = stack.advance(depth, *children)
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return found
 
 
@@ -715,7 +722,7 @@ def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     while more:
         children, _, _, _, _, _, count = _visit(data, ray, node, _Key(ray.s_hi), more)
         total += count
-        node, _, depth, more = stack.advance(depth, *children)
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return total
 
 
