@@ -6,18 +6,21 @@ with a profile revolved about that axis. Every kind works the same way and
 only supplies its leaf test (one segment or one piece of curve) and its
 local geometry; this module holds the rest:
 
-* :class:`LatheData`: the opaque buffers every kind has (threaded BVH and
-  padded bounding cylinder), built with :func:`opaque` values so that new
-  profile data never recompiles a kernel;
+* :class:`LatheData`: the opaque buffers every kind has (BVH and padded
+  bounding cylinder), built with :func:`opaque` values so that new profile
+  data never recompiles a kernel;
 * :func:`threaded_bvh`: the stackless BVH over annular boxes in the (r, z)
-  plane, stored four times with different child orders;
+  plane, stored four times with different child orders (B-splines), and
+  :func:`child_box_bvh`, the same tree for a traversal with a stack, each
+  inner node holding its children's boxes (polylines);
 * :func:`unit_frame`: the profile's size and centre, by which every kind
   stores its data divided (see "Units" below);
 * :class:`LatheRay`: ray set-up: into the unit frame, clip against the
   bounding cylinder, move the origin to the entry point, the ray's radial
   quadratic and its BVH copy;
 * :func:`enter_annular_box`, :func:`bvh_link`, :func:`bvh_next`: one step of
-  the threaded traversal;
+  the threaded traversal; :func:`enter_child_box`: the box test of the
+  child-box tree;
 * the result types :class:`LatheHit` and :class:`LatheGeometry`.
 
 Units. Whatever the user's units (a profile 1e-30 or 1e20 across), the
@@ -301,11 +304,12 @@ class LatheData:
     attributes.
 
     ``nodes``
-        Float buffer of per-node records of the four threaded BVH copies
-        (layout chosen by the kind).
+        Float buffer of per-node records of the four BVH copies (layout
+        chosen by the kind).
     ``links``
-        UInt32 buffer: the miss link of an inner node, or ``LEAF | index``
-        for a leaf.
+        UInt32 buffer: the link of an inner node (:func:`threaded_bvh`: its
+        miss link; :func:`child_box_bvh`: its second child), or ``LEAF |
+        index`` for a leaf.
     ``n_nodes``
         Opaque UInt32: nodes per copy.
     ``bound_r, bound_z_lo, bound_z_hi``

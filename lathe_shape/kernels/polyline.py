@@ -18,12 +18,13 @@ which is the paper's cone frustum ``x^2 + y^2 = (A z + B)^2`` (eq. 1) scaled by
 ``z = z0`` (eqs. 6-7, a double root) when ``n_r = 0``. Substituting the ray
 gives one quadratic (eq. 1 with eq. 3) for frusta, cylinders and annuli alike.
 
-The ray set-up, the threaded BVH over annular boxes in the (r, z) plane and
-its traversal step are those of every lathe kernel (kernels/common.py); this
-module supplies the segment (leaf) test and the local geometry. An inner
-node's box test reuses the leaf's quadratic: with ``(n_r, n_z, c) = (1, 0,
-rmax)`` it is the cylinder ``r = rmax``, whose roots bound the box's radial
-interval, so one quadratic per step serves both kinds of node.
+The ray set-up and the BVH over annular boxes in the (r, z) plane are those
+of every lathe kernel (kernels/common.py); this module supplies the segment
+(leaf) test, the local geometry and the traversal: each inner node holds
+its two children's boxes (``child_box_bvh``), tested without solving a
+quadratic (``enter_child_box``); a ray visits the child it enters first and
+keeps the other on a small per-lane stack, dropped once the ray's best hit
+lies before it. Only leaves solve the segment's quadratic.
 
 Float32 precision. Beyond moving the origin to the bounding cylinder (see
 kernels/common.py), three things keep the quadratic accurate: its roots are
@@ -125,8 +126,9 @@ class PolylineData(LatheData):
     below are in the unit frame:
 
     ``nodes``
-        Float buffer, 8 floats per node of the four threaded BVH copies.
-        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)`` (rmin^2 as
+        Float buffer, 8 floats per node of the four BVH copies
+        (``child_box_bvh``). Inner node: ``(rmax^2, rmin^2, zmin, zmax)`` of
+        its first child's box, then of its second's (rmin^2 as
         ``box_rmin2``); leaf:
         ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``seg_geo``
@@ -370,7 +372,7 @@ def _roots(ray: _Ray, n_r, n_z, c):
 
 class _Stack:
     """Per-lane stack of the children still to visit, with where the ray
-    enters their slabs (local memory; the tree is at most
+    enters them (local memory; the tree is at most
     :data:`~lathe_shape.kernels.common.BVH_DEPTH` levels deep, and a visit
     pushes at most one child)."""
 
@@ -389,10 +391,11 @@ class _Stack:
         slot = dr.minimum(depth, BVH_DEPTH - 1)
         self.node[slot] = far   # kept only where pushed (the slot is free)
         self.s[slot] = far_s
-        node, node_s = mi.UInt32(near), mi.Float(near_s)
-        more = mi.Bool(go)
-        depth = dr.select(push, depth + 1, depth)
-        pop = ~go & (depth > 0)
+        node = mi.UInt32(near)                     # node to visit next
+        node_s = mi.Float(near_s)                  # where the ray enters it
+        more = mi.Bool(go)                         # whether there is one
+        depth = dr.select(push, depth + 1, depth)  # entries on the stack
+        pop = ~go & (depth > 0)                    # whether to pop one
         # Entries that the ray enters after the best hit so far are dropped
         while pop:
             depth -= 1
@@ -407,8 +410,9 @@ def _children(ray: _Ray, node, link, box0, box1, s_best, inner):
     """An inner node's two children (boxes ``box0``, ``box1``, see
     ``PolylineData.nodes``): ``(go, near, near_s, push, far, far_s)``: visit
     ``near`` next (where ``go``), entering it at ``near_s``, and later
-    ``far`` (where ``push``); the child whose slab the ray enters first is
-    the near one, ties go to the first child (the copy's order)."""
+    ``far`` (where ``push``); the child that the ray enters first (its slab
+    and cylinder, :func:`enter_child_box`) is the near one, ties go to the
+    first child (the copy's order)."""
     in0, s0 = enter_child_box(ray, box0, s_best)
     in1, s1 = enter_child_box(ray, box1, s_best)
     in0 &= inner
@@ -613,7 +617,7 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     of the traversal."""
     stack = _Stack()
     node = mi.UInt32(ray.first)          # node to visit (the root: the ray is clipped to its box)
-    node_s = mi.Float(ray.s_lo)          # where the ray enters its slab
+    node_s = mi.Float(ray.s_lo)          # where the ray enters it
     depth = dr.zeros(mi.UInt32, dr.width(node_s))  # nodes on the stack
     more = mi.Bool(ray.active)           # whether a node is left to visit
     s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
