@@ -1,11 +1,14 @@
-"""Kernel-only throughput of ``intersect_polyline``: 31 vs 300 segments.
+"""Kernel-only throughput of ``intersect_polyline``: 31, 300 and 1000 segments.
 
-Both profiles are the same glass (a cup with a solid base and curved walls)
+All profiles are the same glass (a cup with a solid base and curved walls)
 sampled with different segment counts. Rays come from a pinhole camera
-looking at the glass (about half of them hit); each timing excludes the
-first (compiling) call and takes the best of several runs.
+looking at the glass (about half of them hit). After one compiling call per
+profile, the profiles are timed in interleaved rounds (31, 300, 1000, 31,
+...) and each reports the median of its rounds: wall time, or with
+``--threads 1`` the process's CPU time on one Dr.Jit thread (robust on a
+busy machine).
 
-Usage: ``python scripts/bench_kernel.py [n_rays] [--variant llvm_ad_rgb]``
+Usage: ``python scripts/bench_kernel.py [n_rays] [--rounds 7] [--threads N] [--variant llvm_ad_rgb]``
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ import mitsuba as mi
 import numpy as np
 
 from lathe_shape.kernels.polyline import build_polyline_data, intersect_polyline
+
+SEGMENTS = (31, 300, 1000)
 
 
 def glass_points(n_seg: int) -> np.ndarray:
@@ -50,39 +55,44 @@ def camera_rays(n: int):
             mi.Vector3f(d.astype(np.float32)))
 
 
-def bench(data, o, d, repeats: int = 5) -> float:
-    """Best wall time of one evaluated nearest-hit query over all rays."""
+def timed_query(data, o, d, clock) -> tuple[float, float]:
+    """``(seconds by clock, hit rate)`` of one evaluated nearest-hit query
+    over all rays."""
     n = dr.width(o)
-    tmax = dr.full(mi.Float, dr.inf, n)
-    active = dr.full(mi.Bool, True, n)
-    best = np.inf
-    for i in range(repeats + 1):
-        start = time.perf_counter()
-        hit = intersect_polyline(data, o, d, tmax, active)
-        dr.eval(hit.t, hit.seg, hit.u, hit.valid)
-        dr.sync_thread()
-        if i > 0:
-            best = min(best, time.perf_counter() - start)
-    return best, dr.mean(mi.Float(hit.valid))[0]
+    start = clock()
+    hit = intersect_polyline(data, o, d, dr.full(mi.Float, dr.inf, n), dr.full(mi.Bool, True, n))
+    dr.eval(hit.t, hit.seg, hit.u, hit.valid)
+    dr.sync_thread()
+    return clock() - start, dr.mean(mi.Float(hit.valid))[0]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("n_rays", nargs="?", type=int, default=1 << 20, help="rays (default 2^20)")
+    parser.add_argument("--rounds", type=int, default=7, help="interleaved timed rounds (default 7)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="Dr.Jit threads (default: all); 1 times the process's CPU time")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba JIT variant")
     args = parser.parse_args()
     mi.set_variant(args.variant)
-    n_rays = args.n_rays
-    o, d = camera_rays(n_rays)
-    rates = {}
-    for n_seg in (31, 300):
-        n, data = profile_data(n_seg)
-        seconds, hit_rate = bench(data, o, d)
-        rates[n_seg] = dr.width(o) / seconds
-        print(f'{n:4d} segments: {rates[n_seg] / 1e6:7.2f} Mrays/s '
-              f'({seconds * 1e3:6.1f} ms, hit rate {hit_rate:.2f})')
-    print(f'time ratio 300 / 31 segments: {rates[31] / rates[300]:.2f}')
+    if args.threads is not None:
+        dr.set_thread_count(args.threads)
+    clock = time.process_time if args.threads == 1 else time.perf_counter
+    o, d = camera_rays(args.n_rays)
+    cases = {n_seg: profile_data(n_seg) for n_seg in SEGMENTS}
+    hit_rate = {n_seg: timed_query(data, o, d, clock)[1] for n_seg, (_, data) in cases.items()}
+    times: dict[int, list[float]] = {n_seg: [] for n_seg in SEGMENTS}
+    for _ in range(args.rounds):
+        for n_seg, (_, data) in cases.items():
+            times[n_seg].append(timed_query(data, o, d, clock)[0])
+    unit = "CPU ms, 1 thread" if args.threads == 1 else "ms"
+    median = {n_seg: float(np.median(t)) for n_seg, t in times.items()}
+    for n_seg, (n, _) in cases.items():
+        print(f"{n:5d} segments: {dr.width(o) / median[n_seg] / 1e6:7.2f} Mrays/s "
+              f"({median[n_seg] * 1e3:6.1f} {unit}, hit rate {hit_rate[n_seg]:.2f})")
+    for n_seg in SEGMENTS[1:]:
+        print(f"time ratio {n_seg} / {SEGMENTS[0]} segments: {median[n_seg] / median[SEGMENTS[0]]:.2f}")
 
 
-if __name__ == '__main__':
+if __name__ == "__main__":
     main()

@@ -6,18 +6,21 @@ with a profile revolved about that axis. Every kind works the same way and
 only supplies its leaf test (one segment or one piece of curve) and its
 local geometry; this module holds the rest:
 
-* :class:`LatheData`: the opaque buffers every kind has (threaded BVH and
-  padded bounding cylinder), built with :func:`opaque` values so that new
-  profile data never recompiles a kernel;
+* :class:`LatheData`: the opaque buffers every kind has (BVH and padded
+  bounding cylinder), built with :func:`opaque` values so that new profile
+  data never recompiles a kernel;
 * :func:`threaded_bvh`: the stackless BVH over annular boxes in the (r, z)
-  plane, stored four times with different child orders;
+  plane, stored four times with different child orders (B-splines), and
+  :func:`child_box_bvh`, the same tree for a traversal with a stack, each
+  inner node holding its children's boxes (polylines);
 * :func:`unit_frame`: the profile's size and centre, by which every kind
   stores its data divided (see "Units" below);
 * :class:`LatheRay`: ray set-up: into the unit frame, clip against the
   bounding cylinder, move the origin to the entry point, the ray's radial
   quadratic and its BVH copy;
 * :func:`enter_annular_box`, :func:`bvh_link`, :func:`bvh_next`: one step of
-  the threaded traversal;
+  the threaded traversal; :func:`enter_child_box`: the box test of the
+  child-box tree;
 * the result types :class:`LatheHit` and :class:`LatheGeometry`.
 
 Units. Whatever the user's units (a profile 1e-30 or 1e20 across), the
@@ -53,6 +56,7 @@ import mitsuba as mi
 import numpy as np
 
 __all__ = [
+    "BVH_DEPTH",
     "LEAF",
     "LatheData",
     "LatheGeometry",
@@ -63,7 +67,9 @@ __all__ = [
     "box_rmin2",
     "bvh_link",
     "bvh_next",
+    "child_box_bvh",
     "enter_annular_box",
+    "enter_child_box",
     "opaque",
     "radial_interval",
     "threaded_bvh",
@@ -124,14 +130,16 @@ def _revolved_area(rmin, rmax, zmin, zmax):
     return (rmax + rmin) * (zmax - zmin) + (rmax - rmin) * (rmax + rmin)
 
 
-def _sah_split(box: np.ndarray, idx: np.ndarray):
+def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
     """Tree over the boxes ``idx`` of ``box`` (rows ``(rmin, rmax, zmin,
     zmax)``): ``('leaf', k, bounds)`` or ``('node', bounds, axis, lower,
     upper)``, ``lower`` holding the smaller centres along ``axis`` (0: r,
     1: z). The split, along either axis between boxes sorted by centre,
     minimises the surface area heuristic (:func:`_revolved_area` of each
     side times its box count): fewer nodes visited per ray than a median
-    split."""
+    split. ``depth``: at most that many levels below this node (``None``:
+    any); where the heuristic's split would need more, the split halves
+    the boxes instead."""
     bounds = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
     if len(idx) == 1:
         return ("leaf", int(idx[0]), bounds)
@@ -152,7 +160,50 @@ def _sah_split(box: np.ndarray, idx: np.ndarray):
         if best is None or cost[k] < best[0]:
             best = (cost[k], axis, order, k + 1)
     _, axis, order, half = best
-    return ("node", bounds, axis, _sah_split(box, order[:half]), _sah_split(box, order[half:]))
+    if depth is not None:
+        if max(half, len(idx) - half) > 1 << (depth - 1):
+            half = len(idx) // 2
+        depth -= 1
+    return ("node", bounds, axis, _sah_split(box, order[:half], depth),
+            _sah_split(box, order[half:], depth))
+
+
+def _bounds(node: tuple) -> tuple:
+    """The bounds of a node of :func:`_sah_split`'s tree."""
+    return node[2] if node[0] == "leaf" else node[1]
+
+
+def _store_copies(tree: tuple, inner_record: Callable, leaf_record: Callable,
+                  link_to_second: bool) -> tuple[list, list]:
+    """``(records, links)`` of the four pre-order copies of ``tree`` (see
+    :func:`threaded_bvh`): ``inner_record(node, first, second)`` with the
+    children in the copy's order, ``leaf_record(index, bounds)``; an inner
+    node's link is the global index of its second child
+    (``link_to_second``) or of the node after its subtree."""
+    records: list = []
+    links: list = []
+
+    def store(node, z_up: bool, r_out: bool) -> None:
+        if node[0] == "leaf":
+            records.append(leaf_record(node[1], node[2]))
+            links.append(LEAF | node[1])
+            return
+        _, _, axis, first, second = node
+        if (axis == 1 and not z_up) or (axis == 0 and r_out):
+            first, second = second, first
+        me = len(records)
+        records.append(inner_record(node, first, second))
+        links.append(0)
+        store(first, z_up, r_out)
+        if link_to_second:
+            links[me] = len(records)
+        store(second, z_up, r_out)
+        if not link_to_second:
+            links[me] = len(records)  # miss link: next node after this subtree
+
+    for z_up, r_out in [(True, True), (True, False), (False, True), (False, False)]:
+        store(tree, z_up, r_out)
+    return records, links
 
 
 def threaded_bvh(
@@ -174,29 +225,40 @@ def threaded_bvh(
     subtree) or ``LEAF | index`` for a leaf; ``n_nodes`` per copy.
     """
     tree = _sah_split(np.asarray(box, dtype=np.float64), np.arange(len(box)))
-    records: list = []
-    links: list = []
-
-    def thread(node, z_up: bool, r_out: bool) -> None:
-        if node[0] == "leaf":
-            records.append(leaf_record(node[1], node[2]))
-            links.append(LEAF | node[1])
-            return
-        _, bounds, axis, first, second = node
-        if (axis == 1 and not z_up) or (axis == 0 and r_out):
-            first, second = second, first
-        me = len(records)
-        records.append(inner_record(bounds))
-        links.append(0)
-        thread(first, z_up, r_out)
-        thread(second, z_up, r_out)
-        links[me] = len(records)  # miss link: next node after this subtree
-
-    for z_up, r_out in [(True, True), (True, False), (False, True), (False, False)]:
-        thread(tree, z_up, r_out)
+    records, links = _store_copies(tree, lambda node, first, second: inner_record(node[1]),
+                                   leaf_record, False)
     n_nodes = 2 * len(box) - 1
     assert len(records) == 4 * n_nodes
     return records, links, n_nodes
+
+
+#: Levels below the root of a :func:`child_box_bvh` at most: a kernel's
+#: per-lane stack of children still to visit needs as many entries.
+BVH_DEPTH = 32
+
+
+def child_box_bvh(
+    box: np.ndarray,
+    child_record: Callable[[tuple], list],
+    leaf_record: Callable[[int, tuple], list],
+) -> tuple[list, list, int]:
+    """A BVH over annular boxes in the (r, z) plane for a traversal with a
+    stack, whose inner nodes hold their children's boxes.
+
+    The tree (``box`` as in :func:`threaded_bvh`, at most
+    :data:`BVH_DEPTH` levels) is stored four times in pre-order, each copy
+    with the child order of :func:`threaded_bvh`'s copy. An inner node's
+    record is ``child_record(bounds)`` of its first child followed by that
+    of its second child, so that one visit tests both; its first child is
+    the next node. Returns ``(records, links, n_nodes)``: ``links[k]`` is
+    the global index of an inner node's second child, or ``LEAF | index``
+    for a leaf; ``n_nodes`` per copy.
+    """
+    tree = _sah_split(np.asarray(box, dtype=np.float64), np.arange(len(box)), BVH_DEPTH)
+    records, links = _store_copies(
+        tree, lambda node, first, second: [*child_record(_bounds(first)), *child_record(_bounds(second))],
+        leaf_record, True)
+    return records, links, 2 * len(box) - 1
 
 
 # ---------------------------------------------------------------------------
@@ -242,11 +304,12 @@ class LatheData:
     attributes.
 
     ``nodes``
-        Float buffer of per-node records of the four threaded BVH copies
-        (layout chosen by the kind).
+        Float buffer of per-node records of the four BVH copies (layout
+        chosen by the kind).
     ``links``
-        UInt32 buffer: the miss link of an inner node, or ``LEAF | index``
-        for a leaf.
+        UInt32 buffer: the link of an inner node (:func:`threaded_bvh`: its
+        miss link; :func:`child_box_bvh`: its second child), or ``LEAF |
+        index`` for a leaf.
     ``n_nodes``
         Opaque UInt32: nodes per copy.
     ``bound_r, bound_z_lo, bound_z_hi``
@@ -381,6 +444,18 @@ class LatheRay:
         self.c = dr.fma(ox, ox, oy * oy)
         self.cross = dr.fma(ox, d.y, -oy * d.x)
         self.inv_dz = inv_dz
+        self.oz_inv_dz = self.o.z * inv_dz
+        # The same quadratic as r(s)^2 = (sqrt(a) s - x_axis)^2 + r2_axis
+        # (a sum of squares: no cancellation; see enter_child_box), r2_axis
+        # the line's smallest r^2, reached at s_axis = x_axis / sqrt(a). A
+        # ray parallel to the axis has r^2 = c, and its cylinder intervals
+        # are (nearly) infinite: 1 / sqrt(a) is taken as 1e30.
+        self.sqrt_a = dr.sqrt(a_xy)
+        inv_sqrt_a = dr.select(a_xy > 0, dr.rcp(self.sqrt_a), 0)
+        self.x_axis = -self.b * inv_sqrt_a
+        self.r2_axis = dr.select(a_xy > 0, dr.square(self.cross * inv_sqrt_a), self.c)
+        self.s_axis = self.x_axis * inv_sqrt_a
+        self.inv_sqrt_a = dr.select(a_xy > 0, inv_sqrt_a, 1e30)
         # BVH copy (see threaded_bvh): lower child first when going up,
         # outer child first when moving towards the axis
         copy = dr.select(d.z >= 0, 0, 2) + dr.select(self.b <= 0, 0, 1)
@@ -441,6 +516,29 @@ def enter_annular_box(ray: LatheRay, zmin, zmax, r_lo, r_hi, rmin2, s_best):
     lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), r_lo), ray.s_lo)
     hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), r_hi), s_best)
     return (lo <= hi) & ray.reaches(lo, hi, rmin2)
+
+
+def enter_child_box(ray: LatheRay, box: mi.Vector4f, s_best: mi.Float) -> tuple[mi.Bool, mi.Float]:
+    """Whether the ray meets the annular box ``box = (rmax^2, rmin2, zmin,
+    zmax)`` (``rmin2`` as :func:`box_rmin2`) at some ``s`` in ``(ray.s_lo,
+    s_best)``, and where it enters the box's slab and cylinder ``r <= rmax``
+    (a lower bound of where it enters the box).
+
+    With ``r(s)^2 = (sqrt(a) s - x_axis)^2 + r2_axis`` the cylinder's
+    interval is ``s_axis -+ sqrt(rmax^2 - r2_axis) / sqrt(a)`` (no
+    quadratic to solve, no cancellation: ``r2_axis`` is the line's own
+    smallest ``r^2``); on its part in the slab the convex ``r(s)^2`` is
+    largest at an end, which must reach ``rmin^2``."""
+    zl = dr.fma(box.z, ray.inv_dz, -ray.oz_inv_dz)
+    zh = dr.fma(box.w, ray.inv_dz, -ray.oz_inv_dz)
+    half = dr.sqrt(dr.maximum(box.x - ray.r2_axis, 0)) * ray.inv_sqrt_a
+    lo = dr.maximum(dr.maximum(dr.minimum(zl, zh), ray.s_lo), ray.s_axis - half)
+    hi = dr.minimum(dr.minimum(dr.maximum(zl, zh), s_best), ray.s_axis + half)
+    x_lo = dr.fma(ray.sqrt_a, lo, -ray.x_axis)
+    x_hi = dr.fma(ray.sqrt_a, hi, -ray.x_axis)
+    below_max = ray.r2_axis <= box.x
+    above_min = (dr.fma(x_lo, x_lo, ray.r2_axis) >= box.y) | (dr.fma(x_hi, x_hi, ray.r2_axis) >= box.y)
+    return (lo <= hi) & below_max & above_min, lo
 
 
 def bvh_link(links: mi.UInt32, node: mi.UInt32, active: mi.Bool):

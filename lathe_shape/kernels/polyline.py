@@ -18,12 +18,13 @@ which is the paper's cone frustum ``x^2 + y^2 = (A z + B)^2`` (eq. 1) scaled by
 ``z = z0`` (eqs. 6-7, a double root) when ``n_r = 0``. Substituting the ray
 gives one quadratic (eq. 1 with eq. 3) for frusta, cylinders and annuli alike.
 
-The ray set-up, the threaded BVH over annular boxes in the (r, z) plane and
-its traversal step are those of every lathe kernel (kernels/common.py); this
-module supplies the segment (leaf) test and the local geometry. An inner
-node's box test reuses the leaf's quadratic: with ``(n_r, n_z, c) = (1, 0,
-rmax)`` it is the cylinder ``r = rmax``, whose roots bound the box's radial
-interval, so one quadratic per step serves both kinds of node.
+The ray set-up and the BVH over annular boxes in the (r, z) plane are those
+of every lathe kernel (kernels/common.py); this module supplies the segment
+(leaf) test, the local geometry and the traversal: each inner node holds
+its two children's boxes (``child_box_bvh``), tested without solving a
+quadratic (``enter_child_box``); a ray visits the child it enters first and
+keeps the other on a small per-lane stack, dropped once the ray's best hit
+lies before it. Only leaves solve the segment's quadratic.
 
 Float32 precision. Beyond moving the origin to the bounding cylinder (see
 kernels/common.py), three things keep the quadratic accurate: its roots are
@@ -70,6 +71,7 @@ import numpy as np
 
 from ..profiles.polyline import Profile
 from .common import (
+    BVH_DEPTH,
     NO_CROSSING,
     LatheData,
     LatheGeometry,
@@ -77,10 +79,9 @@ from .common import (
     LatheRay,
     box_rmin2,
     bvh_link,
-    bvh_next,
-    enter_annular_box,
+    child_box_bvh,
+    enter_child_box,
     opaque,
-    threaded_bvh,
     to_unit_frame,
     unit_frame,
 )
@@ -125,8 +126,9 @@ class PolylineData(LatheData):
     below are in the unit frame:
 
     ``nodes``
-        Float buffer, 8 floats per node of the four threaded BVH copies.
-        Inner node: ``(1, 0, rmax, rmin^2, zmin, zmax, 0, 0)`` (rmin^2 as
+        Float buffer, 8 floats per node of the four BVH copies
+        (``child_box_bvh``). Inner node: ``(rmax^2, rmin^2, zmin, zmax)`` of
+        its first child's box, then of its second's (rmin^2 as
         ``box_rmin2``); leaf:
         ``(n_r, n_z, c, r0, z0, dr / L^2, dz / L^2, tol / L)``.
     ``seg_geo``
@@ -225,11 +227,10 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
-    recs, links, n_nodes = threaded_bvh(
+    recs, links, n_nodes = child_box_bvh(
         np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
                   np.maximum(z0, z1) + pad], axis=1),
-        # Inner node: the "cylinder" line (1, 0, rmax) and the box (see _visit).
-        lambda b: [1.0, 0.0, b[1], box_rmin2(b[0]), b[2], b[3], 0.0, 0.0],
+        lambda b: [b[1] * b[1], box_rmin2(b[0]), b[2], b[3]],
         lambda k, b: leaf_rec[k],
     )
 
@@ -369,52 +370,89 @@ def _roots(ray: _Ray, n_r, n_z, c):
     return q / qa, qc / q, disc, has_root
 
 
-def _enter_inner(ray: _Ray, rec0, rec1, s1, s2, has_root, s_best):
-    """Whether the ray enters an inner node's box before ``s_best``. Its
-    quadratic, with ``(n_r, n_z, c) = (1, 0, rmax)``, is the cylinder ``r =
-    rmax``: the roots ``s1``, ``s2`` bound the box's radial interval."""
-    inside = ray.c <= rec0.z * rec0.z
-    r_lo = dr.select(ray.parallel, dr.select(inside, -dr.inf, dr.inf),
-                     dr.select(has_root, dr.minimum(s1, s2), dr.inf))
-    r_hi = dr.select(ray.parallel, dr.inf, dr.maximum(s1, s2))
-    return enter_annular_box(ray, rec1.x, rec1.y, r_lo, r_hi, rec0.w, s_best)
+class _Stack:
+    """Per-lane stack of the children still to visit, with where the ray
+    enters them (local memory; the tree is at most
+    :data:`~lathe_shape.kernels.common.BVH_DEPTH` levels deep, and a visit
+    pushes at most one child)."""
+
+    def __init__(self) -> None:
+        self.node = dr.alloc_local(mi.UInt32, BVH_DEPTH)
+        self.s = dr.alloc_local(mi.Float, BVH_DEPTH)
+
+    @dr.syntax
+    def advance(self, depth, s_best, go, near, near_s, push, far, far_s):
+        """After a visit: ``(node, node_s, depth, more)``, the node to visit
+        next (``near`` where ``go``, else the top of the stack that the ray
+        enters before ``s_best``), where the ray enters it, the new stack
+        depth (``far`` pushed where ``push``) and whether a node is left.
+        ``depth`` must start as an array of the rays' width: from a scalar
+        0, Dr.Jit 1.5 read back wrong entries."""
+        slot = dr.minimum(depth, BVH_DEPTH - 1)
+        self.node[slot] = far   # kept only where pushed (the slot is free)
+        self.s[slot] = far_s
+        node = mi.UInt32(near)                     # node to visit next
+        node_s = mi.Float(near_s)                  # where the ray enters it
+        more = mi.Bool(go)                         # whether there is one
+        depth = dr.select(push, depth + 1, depth)  # entries on the stack
+        pop = ~go & (depth > 0)                    # whether to pop one
+        # Entries that the ray enters after the best hit so far are dropped
+        while pop:
+            depth -= 1
+            node = self.node[depth]
+            node_s = self.s[depth]
+            more = node_s <= s_best
+            pop = ~more & (depth > 0)
+        return node, node_s, depth, more
+
+
+def _children(ray: _Ray, node, link, box0, box1, s_best, inner):
+    """An inner node's two children (boxes ``box0``, ``box1``, see
+    ``PolylineData.nodes``): ``(go, near, near_s, push, far, far_s)``: visit
+    ``near`` next (where ``go``), entering it at ``near_s``, and later
+    ``far`` (where ``push``); the child that the ray enters first (its slab
+    and cylinder, :func:`enter_child_box`) is the near one, ties go to the
+    first child (the copy's order)."""
+    in0, s0 = enter_child_box(ray, box0, s_best)
+    in1, s1 = enter_child_box(ray, box1, s_best)
+    in0 &= inner
+    in1 &= inner
+    swap = in1 & (~in0 | (s1 < s0))
+    first, second = node + 1, link
+    return (in0 | in1, dr.select(swap, second, first), dr.select(swap, s1, s0), in0 & in1,
+            dr.select(swap, first, second), dr.select(swap, s0, s1))
 
 
 @dr.syntax
 def _visit(data: PolylineData, ray: _Ray, node: mi.UInt32, best: _Key, active: mi.Bool):
-    """Process one node: box test for inner nodes, segment test for leaves.
+    """Visit one node whose box the ray enters: box tests of an inner node's
+    children, the segment test of a leaf.
 
-    Returns ``(next_node, s_hit, u_hit, seg, hit, key, count)``; ``hit``
-    marks a leaf whose segment is crossed after ``ray.after`` and before
-    ``best`` (key order, :class:`_Key`), at ``s_hit`` with key ``key``,
-    ``count`` its number of crossings there. Each test is a symbolic ``if``:
-    a packet whose lanes are all at leaves (or all at inner nodes) skips the
-    other one.
+    Returns ``(children, s_hit, u_hit, seg, hit, key, count)``:
+    ``children`` as :func:`_children` returns them (none for a leaf);
+    ``hit`` marks a leaf whose segment is crossed after ``ray.after`` and
+    before ``best`` (key order, :class:`_Key`), at ``s_hit`` with key
+    ``key``, ``count`` its number of crossings there. The segment test is a
+    symbolic ``if``: a packet without a lane at a leaf skips it.
     """
-    s_best = best.s
     rec0 = dr.gather(mi.Vector4f, data.nodes, node * 2, active)
     rec1 = dr.gather(mi.Vector4f, data.nodes, node * 2 + 1, active)
     link, is_leaf, seg = bvh_link(data.links, node, active)
     leaf = active & is_leaf
-    # One quadratic serves both kinds of node (the leaf's segment, the inner
-    # node's cylinder)
-    s1, s2, disc, has_root = _roots(ray, rec0.x, rec0.y, rec0.z)
+    children = _children(ray, node, link, rec0, rec1, best.s, active & ~is_leaf)
 
-    entered = mi.Bool(False)  # inner node: its box is entered
-    if active & ~is_leaf:
-        entered = _enter_inner(ray, rec0, rec1, s1, s2, has_root, s_best)
-
-    s_hit = mi.Float(s1)      # leaf: the nearer root on the segment
+    s_hit = mi.Float(0.0)     # leaf: the nearer root on the segment
     u_hit = mi.Float(0.0)     # ... its fraction along the segment
     hit = mi.Bool(False)      # ... and whether it is a hit before s_best
     key = mi.UInt32(0)        # ... its crossing key (_Key)
     count = mi.UInt32(0)      # ... its number of crossings before s_best
     if leaf:
         # Half-open joints, see _segment_roots
+        s1, s2, disc, has_root = _roots(ray, rec0.x, rec0.y, rec0.z)
         s_hit, u_hit, ok, key, count = _segment_hit(data, ray, seg, rec0, rec1, s1, s2, disc >= 0,
                                                     has_root, best, leaf)
         hit = leaf & ok
-    return bvh_next(node, link, is_leaf, entered), s_hit, u_hit, seg, hit, key, count
+    return children, s_hit, u_hit, seg, hit, key, count
 
 
 def _side_terms(ray: _Ray, r, z):
@@ -577,21 +615,25 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     from the bounding cylinder and ``tmax``: ``(hit, s, key)``; ``keyed``:
     ties in ``s`` are broken by the key (:class:`_Key`), else by the order
     of the traversal."""
-    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    stack = _Stack()
+    node = mi.UInt32(ray.first)          # node to visit (the root: the ray is clipped to its box)
+    node_s = mi.Float(ray.s_lo)          # where the ray enters it
+    depth = dr.zeros(mi.UInt32, dr.width(node_s))  # nodes on the stack
+    more = mi.Bool(ray.active)           # whether a node is left to visit
     s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
     key = dr.zeros(mi.UInt32, dr.width(s_best))  # its key (_Key)
     seg = dr.zeros(mi.UInt32, dr.width(s_best))  # its segment
     u = dr.zeros(mi.Float, dr.width(s_best))     # its fraction along seg
     found = dr.zeros(mi.Bool, dr.width(s_best))  # whether a hit was found
-    while ray.active & (node < ray.end):
-        node_next, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
-            data, ray, node, _Key(s_best, key if keyed else None), ray.active & (node < ray.end))
+    while more:
+        children, s_hit, u_hit, seg_hit, hit, key_hit, _ = _visit(
+            data, ray, node, _Key(s_best, key if keyed else None), more)
         s_best = dr.select(hit, s_hit, s_best)
         key = dr.select(hit, key_hit, key)
         u = dr.select(hit, u_hit, u)
         seg = dr.select(hit, seg_hit, seg)
         found |= hit
-        node = node_next
+        node, node_s, depth, more = stack.advance(depth, s_best, *children)
 
     t = ray.s_enter + s_best
     valid = found & (t > 0) & (t < ray.tmax)
@@ -654,14 +696,16 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     Same conventions as :func:`intersect_polyline`; stops at the first hit.
     """
     ray = _Ray(data, o, d, tmax, active)
-    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    stack = _Stack()
+    node = mi.UInt32(ray.first)          # node to visit (the root)
+    depth = dr.zeros(mi.UInt32, dr.width(node))  # nodes on the stack
+    more = mi.Bool(ray.active)           # whether a node is left to visit
     found = dr.zeros(mi.Bool, dr.width(node))  # whether any hit was found
-    while ray.active & (node < ray.end) & ~found:
-        node_next, s_hit, _, _, hit, _, _ = _visit(
-            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
+    while more & ~found:
+        children, s_hit, _, _, hit, _, _ = _visit(data, ray, node, _Key(ray.s_hi), more)
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
-        node = node_next
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return found
 
 
@@ -674,13 +718,15 @@ def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     the number is even for every ray (the joint rule of
     :func:`_segment_roots`): the watertightness tests count it."""
     ray = _Ray(data, o, d, dr.full(mi.Float, dr.inf, dr.width(o)), active)
-    node = mi.UInt32(ray.first)          # current node of the threaded BVH
+    stack = _Stack()
+    node = mi.UInt32(ray.first)          # node to visit (the root)
+    depth = dr.zeros(mi.UInt32, dr.width(node))  # nodes on the stack
+    more = mi.Bool(ray.active)           # whether a node is left to visit
     total = dr.zeros(mi.UInt32, dr.width(node))  # crossings so far
-    while ray.active & (node < ray.end):
-        node_next, _, _, _, _, _, count = _visit(
-            data, ray, node, _Key(ray.s_hi), ray.active & (node < ray.end))
+    while more:
+        children, _, _, _, _, _, count = _visit(data, ray, node, _Key(ray.s_hi), more)
         total += count
-        node = node_next
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return total
 
 
