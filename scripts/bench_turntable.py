@@ -11,4 +11,4 @@ seeding policies.
 from lathe_shape.tools.turntable_bench import run_bench
 
 if __name__ == "__main__":
-    run_bench()
+    raise SystemExit(run_bench())

@@ -150,14 +150,21 @@ def flicker(turntable: Turntable, angles: list[float], spp: int, reference_spp: 
     return result
 
 
-def run_bench(argv: list[str] | None = None) -> None:
+def run_bench(argv: list[str] | None = None) -> int:
     """``scripts/bench_turntable.py``: print the frame times, the masked
-    denoise errors and the flicker of both seeding policies."""
+    denoise errors and the flicker of both seeding policies; any error is
+    one line (``bench_turntable.py: error: ...``). Returns the exit status."""
+    from ..cli.common import run_command
+
+    return run_command("bench_turntable.py", bench_parser(), _bench, argv)
+
+
+def _bench(args: argparse.Namespace) -> int:
+    """The body of :func:`run_bench`."""
     from ..cli.common import select_variant
     from .denoise import box_filter_xml
     from .scenes import load_string_in, set_film_size
 
-    args = bench_parser().parse_args(argv)
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
     select_variant(args.variant)
     times = frame_times(args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
@@ -190,6 +197,7 @@ def run_bench(argv: list[str] | None = None) -> None:
         result = flicker(world, angles, args.spp, args.high_spp, denoise)
         print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
               + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
+    return 0
 
 
 #: The default scene: the wine glass in the repository's scenes folder,
