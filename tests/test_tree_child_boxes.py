@@ -133,3 +133,25 @@ def test_single_ray_and_many_segments():
     count = count_crossings_polyline(data, mi.Point3f(far), mi.Vector3f(d.T.astype(np.float32)),
                                      dr.full(mi.Bool, True, len(o))).numpy()
     assert np.all(count % 2 == 0) and np.any(count > 2)
+
+
+def test_stack_holds_a_leaf_at_the_depth_limit():
+    """100 copies of one segment: the heuristic splits one box off per level
+    until the depth limit, so leaves sit BVH_DEPTH levels deep, and rays
+    that enter every box fill the stack (it overflowed by one entry and
+    crashed: a leaf's unpushed child overwrote the top entry)."""
+    from lathe_shape.kernels.polyline import next_crossing_polyline, occluded_polyline
+
+    copies = 100
+    data = build_polyline_data(np.tile([[1.0, 1.0]], (copies, 1)), np.tile([[1.0, 0.0]], (copies, 1)))
+    on = mi.Bool(True)
+    # Across the axis: every copy is crossed twice (r = 1 on both sides).
+    o, d = mi.Point3f(2.0, 0.0, 0.5), mi.Vector3f(-1.0, 0.0, 0.0)
+    assert count_crossings_polyline(data, o, d, on).numpy().tolist() == [2 * copies]
+    assert occluded_polyline(data, o, d, mi.Float(10.0), on).numpy().tolist() == [True]
+    assert intersect_polyline(data, o, d, mi.Float(10.0), on).t.numpy().tolist() == [1.0]
+    # Along the wall inside the boxes' padding: every box entered, no hit.
+    o, d = mi.Point3f(1.0 + 2e-5, 0.0, -1.0), mi.Vector3f(0.0, 0.0, 1.0)
+    assert occluded_polyline(data, o, d, mi.Float(10.0), on).numpy().tolist() == [False]
+    assert not intersect_polyline(data, o, d, mi.Float(10.0), on).valid.numpy().any()
+    assert not next_crossing_polyline(data, o, d, mi.Float(10.0), on)[0].valid.numpy().any()

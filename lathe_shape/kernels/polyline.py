@@ -372,13 +372,15 @@ def _roots(ray: _Ray, n_r, n_z, c):
 
 class _Stack:
     """Per-lane stack of the children still to visit, with where the ray
-    enters them (local memory; the tree is at most
-    :data:`~lathe_shape.kernels.common.BVH_DEPTH` levels deep, and a visit
-    pushes at most one child)."""
+    enters them (local memory). A leaf has at most
+    :data:`~lathe_shape.kernels.common.BVH_DEPTH` inner ancestors, each of
+    whose visits pushes at most one child: so up to ``BVH_DEPTH`` entries
+    are on the stack when a leaf is visited, and that visit writes its (not
+    pushed) child to the slot above them: ``BVH_DEPTH + 1`` slots."""
 
     def __init__(self) -> None:
-        self.node = dr.alloc_local(mi.UInt32, BVH_DEPTH)
-        self.s = dr.alloc_local(mi.Float, BVH_DEPTH)
+        self.node = dr.alloc_local(mi.UInt32, BVH_DEPTH + 1)
+        self.s = dr.alloc_local(mi.Float, BVH_DEPTH + 1)
 
     @dr.syntax
     def advance(self, depth, s_best, go, near, near_s, push, far, far_s):
@@ -388,7 +390,7 @@ class _Stack:
         depth (``far`` pushed where ``push``) and whether a node is left.
         ``depth`` must start as an array of the rays' width: from a scalar
         0, Dr.Jit 1.5 read back wrong entries."""
-        slot = dr.minimum(depth, BVH_DEPTH - 1)
+        slot = dr.minimum(depth, BVH_DEPTH)
         self.node[slot] = far   # kept only where pushed (the slot is free)
         self.s[slot] = far_s
         node = mi.UInt32(near)                     # node to visit next
