@@ -3,6 +3,8 @@ printed as -1, and a CUDA variant refused clearly without a GPU."""
 
 from __future__ import annotations
 
+import re
+
 import drjit as dr
 import mitsuba as mi
 import pytest
@@ -78,3 +80,33 @@ def test_cuda_variant_without_gpu(tmp_path, capsys):
     assert code == 2 and capsys.readouterr().err == (
         "lathe-render: error: variant 'cuda_ad_rgb' needs a CUDA GPU, and none was found (use llvm_ad_rgb)\n")
     assert mi.variant() == VARIANT and list(tmp_path.iterdir()) == []
+
+
+def _included_scene(tmp_path, value: str):
+    """A scene declaring mesh_segments 32 whose one lathe sits in an
+    included file with ``mesh_segments`` ``value``."""
+    (tmp_path / "lathes.xml").write_text(
+        '<scene version="3.0.0"><shape type="lathe" id="vase">'
+        '<string name="profile" value="0 0, 0.5 0, 0.6 1, 0 1"/>'
+        f'<integer name="mesh_segments" value="{value}"/></shape></scene>')
+    main = tmp_path / "main.xml"
+    main.write_text(SCENE.split("<shape")[0].replace('<integrator type="volpath"/>', "")
+                    + '<default name="mesh_segments" value="32"/><include filename="lathes.xml"/></scene>')
+    return main
+
+
+def test_mesh_segments_reaches_included_files(tmp_path):
+    args = compare.build_parser().parse_args(
+        [str(_included_scene(tmp_path, "$mesh_segments")), "-o", str(tmp_path / "out"),
+         "--mesh-segments", "9", "--variant", VARIANT])
+    loaded, lathes, _, _ = open_comparison(args)
+    assert [lathe.mesh_segments for lathe in scene_lathes(loaded)] == [9]
+
+
+def test_mesh_segments_refuses_a_literal_in_an_included_file(tmp_path):
+    main = _included_scene(tmp_path, "5")
+    args = compare.build_parser().parse_args(
+        [str(main), "-o", str(tmp_path / "out"), "--mesh-segments", "9", "--variant", VARIANT])
+    with pytest.raises(Exception, match=re.escape(
+            f"{main}: --mesh-segments 9: lathe 'vase' keeps mesh_segments 5 (set in an included file?)")):
+        open_comparison(args)

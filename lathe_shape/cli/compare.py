@@ -55,7 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mesh-segments", type=int, metavar="N",
                         help="azimuthal steps of the reference mesh: sets every lathe's mesh_segments "
                              "parameter to N, whatever the scene file says (and -D mesh_segments=N "
-                             "where the scene uses $mesh_segments)")
+                             "where the scene declares or uses $mesh_segments, which reaches included "
+                             "files; a literal value in an included file is refused)")
     return parser
 
 
@@ -184,10 +185,8 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     check_at_least("--mesh-segments", args.mesh_segments, 3)
     extra, edit = {}, None
     if args.mesh_segments is not None:
-        from ..tools.scenes import blank_comments, read_scene_text
 
-        text = blank_comments(read_scene_text(args.scene).encode("utf-8")).decode("utf-8")
-        if re.search(r"\$mesh_segments(?!\w)", text):  # (Mitsuba refuses a define the scene does not use)
+        if _uses_mesh_segments(args.scene):  # (Mitsuba refuses a define that nothing uses)
             extra = {"mesh_segments": str(args.mesh_segments)}
 
         def edit(xml_text: str, path: str) -> str:
@@ -200,10 +199,39 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     lathes = len(scene_lathes(scene))
     if not lathes:
         raise CliError(f"{args.scene}: the scene has no lathe shape to compare")
+    if args.mesh_segments is not None:
+        _check_mesh_segments(args.scene, scene_lathes(scene), args.mesh_segments)
     spp = args.spp or scene.sensors()[0].sampler().sample_count()
     check_render_budget(*scene.sensors()[0].film().size(), spp)
     stem = os.path.splitext(os.path.basename(args.scene))[0]
     return scene, lathes, output_folder(args.output or f"{stem}_compare"), spp
+
+
+def _uses_mesh_segments(scene_file: str, depth: int = 0) -> bool:
+    """Whether the scene file or a file it includes uses ``$mesh_segments``."""
+    from ..tools.scenes import blank_comments, read_scene_text
+
+    text = blank_comments(read_scene_text(scene_file).encode("utf-8")).decode("utf-8")
+    if re.search(r"\$mesh_segments(?!\w)", text):
+        return True
+    folder = os.path.dirname(os.path.abspath(scene_file))
+    included = re.findall(r"<include\s+filename=[\"']([^\"']+)[\"']", text)
+    return depth < 8 and any(
+        _uses_mesh_segments(os.path.join(folder, name), depth + 1)
+        for name in included if os.path.isfile(os.path.join(folder, name)))
+
+
+def _check_mesh_segments(scene_file: str, lathes: list, steps: int) -> None:
+    """Refuse a comparison whose lathes did not all get ``--mesh-segments``
+    (a literal value in an included file is out of the edit's reach)."""
+    for lathe in lathes:
+        if lathe.reference == "mesh" and lathe.mesh_segments != steps:
+            name = f"lathe '{lathe.id()}'" if lathe.id() else "a lathe"
+            raise CliError(
+                f"{scene_file}: --mesh-segments {steps}: {name} keeps mesh_segments "
+                f"{lathe.mesh_segments} (set in an included file?); --mesh-segments sets the lathes "
+                "of the scene file itself, and those of included files through $mesh_segments"
+            )
 
 
 #: The two renders: name -> integrator (``max_depth`` added from the scene).
