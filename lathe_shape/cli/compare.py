@@ -185,7 +185,6 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     check_at_least("--mesh-segments", args.mesh_segments, 3)
     extra, edit = {}, None
     if args.mesh_segments is not None:
-
         if _uses_mesh_segments(args.scene):  # (Mitsuba refuses a define that nothing uses)
             extra = {"mesh_segments": str(args.mesh_segments)}
 
