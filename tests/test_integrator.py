@@ -334,3 +334,53 @@ def test_emitting_lathe_lights_as_its_mesh(integrator):
     floor = (slice(24, 32), slice(None))
     assert mesh[floor].mean() > 0.002
     assert abs(exact[floor].mean() / mesh[floor].mean() - 1) < 0.05
+
+
+def test_emitting_lathe_follows_moves_and_profile_edits():
+    """An emitting lathe (traced as its mesh in the integrators' own scene
+    of the shapes other than lathes) moved with set_to_world or reshaped
+    through 'points' keeping its bounds: rendered where and as it now is."""
+    transform = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40,
+                   "to_world": transform().look_at([0, -8, 1], [0, 0, 1], [0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 4}},
+        "vase": {"type": "lathe", "profile": "0 0, 0.5 0, 0.6 1, 0 1",
+                 "to_world": transform().translate([2, 0, 0]), "bsdf": {"type": "diffuse"}},
+        "lamp": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 1, 0.5 2, 0 2", "mesh_segments": 64,
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [1, 1, 1]}}},
+    })
+    exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": 2})
+    mesh_integrator = mi.load_dict({"type": "path", "max_depth": 2})
+
+    def lit():
+        exact = mi.render(scene, integrator=exact_integrator).numpy()[..., 0] > 0.5
+        mesh = mi.render(scene, integrator=mesh_integrator).numpy()[..., 0] > 0.5
+        return int(exact.sum()), int(mesh.sum()), int((exact != mesh).sum())
+
+    before = lit()
+    params = mi.traverse(scene)
+    params["lamp.points"] = mi.Float([0, 0, 0.5, 0, 0.1, 1, 0.5, 2, 0, 2])  # pinched, same bounds
+    params.update()
+    pinched = lit()
+    assert pinched[0] < before[0] - 10 and pinched[2] <= 2
+    lamp = next(s for s in scene.shapes() if s.id() == "lamp")
+    lamp.set_to_world(transform().translate([-1.5, 0, 0]), scene)
+    moved = lit()
+    assert moved[2] <= 2 and moved[0] > 10
+
+
+def test_scene_with_instances_and_lathes_is_refused_clearly():
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "grp": {"type": "shapegroup", "ball": {"type": "sphere", "radius": 0.3}},
+        "inst": {"type": "instance", "shapegroup": {"type": "ref", "id": "grp"}},
+        "vase": {"type": "lathe", "profile": "0 0, 0.5 0, 0.6 1, 0 1"},
+    })
+    with pytest.raises(RuntimeError) as info:
+        mi.render(scene, integrator=mi.load_dict({"type": "lathe_path"}))
+    assert ("cannot render a scene with <shapegroup> instances and lathes"
+            in root_message(info.value))

@@ -58,7 +58,7 @@ from ..kernels.common import NO_CROSSING, opaque
 from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
-from .shape import LatheShape, scene_lathes
+from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
 
 __all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
 
@@ -94,6 +94,15 @@ class ExactSceneGeometry:
             first += len(group.lathes)
         if any(s.class_name() == "Instance" for s in others):
             self._refuse_instanced_lathes(scene)
+            if self.lathes:
+                # Mitsuba 3.9 cannot load an instance into another scene
+                # (load_dict fails with "Couldn't find key"): say why.
+                raise RuntimeError(
+                    "the exact integrators (lathe_path, lathe_whitted, lathe_prb) cannot render a "
+                    "scene with <shapegroup> instances and lathes: they trace the shapes other than "
+                    "lathes in a scene of their own, and Mitsuba cannot place an instance there. "
+                    "Replace the instances by shapes, or render the scene with a stock integrator."
+                )
         #: The non-lathe shapes whose surface interaction is computed by a
         #: direct call each (see :func:`rest_interaction`); ``None``: by
         #: Mitsuba's own call (too many of them, or instances).
@@ -115,7 +124,7 @@ class ExactSceneGeometry:
         """Lathes inside a <shapegroup> are only reached through Mitsuba's
         instances, which cannot call the exact kernel: say so instead of
         silently rendering their reference mesh."""
-        direct = {lathe.ptr for lathe in self.lathes}
+        direct = {lathe.ptr for lathe in scene_lathes(scene)}
         params = mi.traverse(scene)
         for key in params.keys():
             node = params.properties[key][2]
@@ -136,10 +145,10 @@ class ExactSceneGeometry:
 
     @staticmethod
     def rest_bounds(scene: mi.Scene) -> tuple:
-        """Bounds of the shapes traced by Mitsuba (all but the exact
-        lathes): change when one is moved or edited."""
-        boxes = (shape.bbox() for shape in scene.shapes() if not _exact(shape))
-        return tuple((tuple(box.min), tuple(box.max)) for box in boxes)
+        """State of the shapes traced by Mitsuba (all but the exact
+        lathes; :func:`~.shape.mesh_state`): changes when one is moved or
+        edited."""
+        return tuple(mesh_state(shape) for shape in scene.shapes() if not _exact(shape))
 
     def matches(self, scene: mi.Scene) -> bool:
         """Whether this geometry is still valid for ``scene``: the same
@@ -182,7 +191,8 @@ class ExactSceneGeometry:
         for key in params.keys():
             if key.split(".")[-1] in ("to_world", "vertex_positions"):
                 params.set_dirty(key)
-        params.update()
+        with own_mesh_updates(self.rest.shapes()):  # (emitting lathes are here)
+            params.update()
 
     def follow_moves(self) -> None:
         """Bring the lathe sets up to date with lathes moved since the last

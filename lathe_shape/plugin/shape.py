@@ -81,6 +81,7 @@ mesh with attributes, so lathes that share a BSDF stay lathes.
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 import drjit as dr
@@ -425,6 +426,32 @@ class LatheShape(mi.Mesh):
             f"segments={self.profile.segment_count}, r_max={r_max:g}, "
             f"z=[{z_min:g}, {z_max:g}], smooth={self.smooth}]"
         )
+
+
+@contextlib.contextmanager
+def own_mesh_updates(shapes: list[mi.Shape]):
+    """Within this context the lathes among ``shapes`` accept updates of
+    their reference mesh (an acceleration structure rebuilt around them
+    marks their buffers dirty; see :meth:`LatheShape.parameters_changed`)."""
+    lathes = [shape for shape in shapes if isinstance(shape, LatheShape)]
+    for lathe in lathes:
+        lathe._writing_mesh = True
+    try:
+        yield
+    finally:
+        for lathe in lathes:
+            lathe._writing_mesh = False
+
+
+def mesh_state(shape: mi.Shape) -> tuple:
+    """What a rebuild of the acceleration structure around ``shape`` must
+    follow: its bounds, and for a lathe also its transform and profile
+    (a moved or reshaped lathe may keep its bounds)."""
+    box = shape.bbox()
+    state = (tuple(box.min), tuple(box.max))
+    if isinstance(shape, LatheShape):
+        state += (shape.to_world_matrix.tobytes(), id(shape.surface))
+    return state
 
 
 def scene_lathes(scene: mi.Scene) -> list[LatheShape]:
