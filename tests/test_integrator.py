@@ -384,3 +384,33 @@ def test_scene_with_instances_and_lathes_is_refused_clearly():
         mi.render(scene, integrator=mi.load_dict({"type": "lathe_path"}))
     assert ("cannot render a scene with <shapegroup> instances and lathes"
             in root_message(info.value))
+
+
+@pytest.mark.parametrize("max_depth", [1, 2, 3])
+def test_alpha_through_a_null_surface_as_path(max_depth):
+    """A path that ends on a null surface (max_depth reached) saw nothing:
+    alpha 0 there, as with Mitsuba's path (a null sphere before a wall)."""
+    transform = mi.ScalarTransform4f
+
+    def render(integrator: str) -> np.ndarray:
+        return mi.render(mi.load_dict({
+            "type": "scene", "integrator": {"type": integrator, "max_depth": max_depth},
+            "sensor": {"type": "perspective", "fov": 30,
+                       "to_world": transform().look_at([0, -6, 0], [0, 0, 0], [0, 0, 1]),
+                       "film": {"type": "hdrfilm", "width": 16, "height": 16, "pixel_format": "rgba"},
+                       "sampler": {"type": "independent", "sample_count": 4}},
+            "wall": {"type": "rectangle", "bsdf": {"type": "diffuse"},
+                     "to_world": transform().translate([0, 2, 0]).rotate([1, 0, 0], 90).scale(5)},
+            "light": {"type": "point", "position": [0, -3, 0], "intensity": {"type": "rgb", "value": 10}},
+            "ghost": {"type": "sphere", "radius": 0.8, "bsdf": {"type": "null"}},
+            "vase": {"type": "lathe", "profile": "0 0, 0.2 0, 0.2 0.3, 0 0.3",
+                     "to_world": transform().translate([2.5, 0, 2])},
+        })).numpy()
+
+    exact, mesh = render("lathe_path"), render("path")
+    expected = 0.0 if max_depth < 3 else 1.0
+    assert exact[8, 8, 3] == pytest.approx(expected, abs=1e-6)
+    assert mesh[8, 8, 3] == pytest.approx(expected, abs=1e-6)
+    inside = (slice(6, 11), slice(6, 11))  # well inside the sphere's outline
+    assert np.allclose(exact[inside][..., 3], mesh[inside][..., 3], atol=1e-5)
+    assert np.abs(exact[..., 3] - mesh[..., 3]).mean() < 0.02

@@ -258,8 +258,10 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             # the sampled direction (as Mitsuba's path: one dispatch) ---
             wo_em = si.to_local(ds.d)
             sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
+            # (on every surface hit, as path: a path ending on a null
+            # surface must still see its sampled type, for the alpha)
             bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
-                bsdf_ctx, si, wo_em, sample_1, sample_2, active_next)
+                bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf_em))
             L += dr.select(active_em, beta * mis_em * bsdf_val_em * em_weight, 0.0)
 
