@@ -142,3 +142,19 @@ def test_turntable_denoise_needs_rgb(tmp_path, capsys):
         f"lathe-turntable: error: {scene}: --denoise needs an RGB film, and the film has 1 channel(s) "
         f"({why})\n")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("names", [("R", "G", "B", "A"), ("Y",), ("Y", "A"),
+                                   ("R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B")])
+def test_read_exr_reads_what_write_exr_writes(tmp_path, names):
+    """read_exr gives the RGB (or Y) of every channel layout write_exr
+    writes: rgba and luminance(+alpha) films, AOVs after the image."""
+    from lathe_shape.tools.images import read_exr, write_exr
+
+    rng = np.random.default_rng(1)
+    image = rng.random((4, 5, len(names)), dtype=np.float32)
+    write_exr(tmp_path / "x.exr", image, channels=names)
+    pixels, _ = read_exr(tmp_path / "x.exr")
+    colour = 1 if names[0] == "Y" else 3
+    assert pixels.shape == (4, 5, colour)
+    assert np.array_equal(pixels, image[..., :colour])

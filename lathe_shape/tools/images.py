@@ -114,14 +114,18 @@ def write_exr(
 
 def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, object]]:
     """Read an EXR written by :func:`write_exr`: (pixels float32, header), the
-    pixels (H, W, 3) RGB, or (H, W, 1) for a luminance (``Y``) image."""
+    pixels (H, W, 3) RGB (alpha and AOV channels left out), or (H, W, 1) for
+    a luminance (``Y``) image."""
     with OpenEXR.File(os.fspath(path)) as exr:
         header = dict(exr.header())
         channels = exr.channels()
-        if "RGB" in channels:
-            pixels = channels["RGB"].pixels
+        # OpenEXR groups R, G, B (and A) into one entry where it can
+        grouped = next((name for name in ("RGB", "RGBA") if name in channels), None)
+        if grouped is not None:
+            pixels = channels[grouped].pixels[..., :3]
         elif "Y" in channels:
-            pixels = channels["Y"].pixels[..., None]
+            luminance = channels["Y"].pixels
+            pixels = luminance[..., None] if luminance.ndim == 2 else luminance[..., :1]
         else:
             pixels = np.stack([channels[c].pixels for c in "RGB"], axis=-1)
     return np.asarray(pixels, dtype=np.float32), header
