@@ -131,3 +131,17 @@ def test_max_depth_zero_and_one():
     # Point lights are invisible and nothing emits: depth 1 is black too.
     assert render(scene, {"type": "lathe_whitted", "max_depth": 1}, 1, 1).max() == 0.0
     assert render(scene, {"type": "lathe_whitted", "max_depth": 2}, 1, 1).max() > 0.0
+
+
+def test_hide_emitters():
+    """hide_emitters as in lathe_path: the sky black and transparent, the
+    area panel in front of the wall skipped (the wall behind it shows)."""
+    from test_integrator import _hidden_emitters_scene
+
+    whitted = mi.render(_hidden_emitters_scene("lathe_whitted"), seed=1).numpy()
+    path = mi.render(_hidden_emitters_scene("lathe_path"), seed=1).numpy()
+    panel = (slice(10, 14), slice(10, 14))
+    assert whitted[panel][..., :3].mean() > 0.05
+    sky = path[..., 3] == 0
+    assert sky.sum() > 20 and np.abs(whitted[sky]).max() == 0.0
+    assert np.abs(whitted[..., 3] - path[..., 3]).mean() < 0.05

@@ -32,6 +32,11 @@
        surface (docs/method.md, eq. 11), as in ``lathe_path``: ``none``,
        ``terminate`` (the branch stops) or ``fallback`` (default: that
        vertex is redone with the geometric normal).
+   * - ``hide_emitters``
+     - boolean
+     - Hide directly visible emitters as ``lathe_path`` does: camera rays go
+       on through the area emitters they meet first, and the environment
+       seen directly is black with alpha 0. (Default: false)
 
 The ray tree. Every camera ray starts a deterministic binary tree:
 
@@ -152,6 +157,7 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                 f"(expected one of: {', '.join(SHADOW_MODES)})"
             )
         self.normal_check = typed_property(props, "normal_check", str, "fallback", who)
+        self.hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
         if self.normal_check not in NORMAL_CHECKS:
             raise ValueError(
                 f"lathe_whitted: parameter 'normal_check': unknown policy '{self.normal_check}' "
@@ -189,20 +195,25 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         stack = [PendingBranch() for _ in range(max(self.max_depth - 1, 1))]  # ... top first
         L = mi.Spectrum(0.0)                 # Radiance gathered by the whole tree
         active = mi.Bool(active) & (self.max_depth > 0)  # Lanes with a branch to trace
-        valid_ray = mi.Bool(scene.environment() is not None)  # Alpha: camera ray saw something
+        # Alpha: the camera ray saw a surface, or a visible environment
+        valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
+        if dr.hint(self.hide_emitters, mode="scalar"):
+            ray = geometry.skip_area_emitters(ray, active)  # as lathe_path
 
         while dr.hint(active, max_iterations=-1, label="lathe_whitted"):
             si = geometry.ray_intersect(ray, active, depth == 0)  # camera rays: coherent
             valid = si.is_valid()
-            valid_ray |= active & valid & (depth == 0)
 
             # Emitters seen directly or along a specular chain (area lights
             # hit, the environment on a miss): no other strategy finds them.
-            L += dr.select(active, weight * si.emitter(scene).eval(si, active), 0.0)
+            shown = active & ~(~valid & (depth == 0)) if self.hide_emitters else active
+            L += dr.select(shown, weight * si.emitter(scene).eval(si, shown), 0.0)
             vertex = active & valid & (depth + 1 < self.max_depth)
 
             si, vertex, cos_in_geo = self.incident_check(si, ray, vertex)
             bsdf = si.bsdf(ray)
+            # (a surface other than a null one on any branch, as Mitsuba's path)
+            valid_ray |= active & valid & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
 
             # ------------- Direct light at diffuse and glossy lobes -------------
             smooth = vertex & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -231,7 +242,8 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             depth = dr.select(follow, depth + 1, popped.depth)
             active = follow | pop
 
-        return L, valid_ray, []
+        # A hidden environment seen directly, or only through null surfaces, is black
+        return dr.select(valid_ray, L, 0.0), valid_ray, []
 
     def incident_check(self, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
                        vertex: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Bool, mi.Float]:
@@ -348,7 +360,8 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
     def to_string(self) -> str:
         return (
             f"LatheWhittedIntegrator[max_depth={self.max_depth}, cutoff={self.cutoff:g}, "
-            f"shadows='{self.shadows}', normal_check='{self.normal_check}']"
+            f"shadows='{self.shadows}', normal_check='{self.normal_check}', "
+            f"hide_emitters={self.hide_emitters}]"
         )
 
 
