@@ -312,6 +312,14 @@ def test_hide_emitters_as_stock(integrator):
     assert np.abs(exact[..., :3] - mesh[..., :3]).mean() < 0.05 * mesh[..., :3].mean()
 
 
+def _camera(origin: list[float], target: list[float], spp: int) -> dict:
+    """A 32x32 box-filtered perspective camera (z up)."""
+    return {"type": "perspective", "fov": 40,
+            "to_world": mi.ScalarTransform4f().look_at(origin, target, [0, 0, 1]),
+            "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": spp}}
+
+
 @pytest.mark.parametrize("integrator", ["lathe_path", "lathe_whitted"])
 def test_emitting_lathe_lights_as_its_mesh(integrator):
     """A coarse emitting lathe (a 12-step cylinder lamp) lights the floor
@@ -319,11 +327,7 @@ def test_emitting_lathe_lights_as_its_mesh(integrator):
     the lamp is traced as that mesh (its exact surface would shadow them)."""
     transform = mi.ScalarTransform4f
     scene = mi.load_dict({
-        "type": "scene",
-        "sensor": {"type": "perspective", "fov": 40,
-                   "to_world": transform().look_at([0, -8, 4], [0, 0, 0.5], [0, 0, 1]),
-                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
-                   "sampler": {"type": "independent", "sample_count": 64}},
+        "type": "scene", "sensor": _camera([0, -8, 4], [0, 0, 0.5], 64),
         "floor": {"type": "rectangle", "to_world": transform().scale([5, 5, 1]), "bsdf": {"type": "diffuse"}},
         "lamp": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 2, 0 2", "mesh_segments": 12,
                  "to_world": transform().translate([0, 0, 0.2]),
@@ -342,11 +346,7 @@ def test_emitting_lathe_follows_moves_and_profile_edits():
     through 'points' keeping its bounds: rendered where and as it now is."""
     transform = mi.ScalarTransform4f
     scene = mi.load_dict({
-        "type": "scene",
-        "sensor": {"type": "perspective", "fov": 40,
-                   "to_world": transform().look_at([0, -8, 1], [0, 0, 1], [0, 0, 1]),
-                   "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
-                   "sampler": {"type": "independent", "sample_count": 4}},
+        "type": "scene", "sensor": _camera([0, -8, 1], [0, 0, 1], 4),
         "vase": {"type": "lathe", "profile": "0 0, 0.5 0, 0.6 1, 0 1",
                  "to_world": transform().translate([2, 0, 0]), "bsdf": {"type": "diffuse"}},
         "lamp": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 1, 0.5 2, 0 2", "mesh_segments": 64,
