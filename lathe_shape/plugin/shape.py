@@ -279,11 +279,8 @@ class LatheShape(mi.Mesh):
             if not keys:
                 raise ValueError(f"lathe '{self.id()}' is not part of the given scene")
             params[keys[0]] = type(params[keys[0]])(buffers[name].ravel())
-        self._writing_mesh = True
-        try:
+        with own_mesh_updates([self]):
             params.update()
-        finally:
-            self._writing_mesh = False
         self._set_transform(matrix)
 
     # -- the profile as a differentiable parameter ---------------------------
@@ -344,11 +341,8 @@ class LatheShape(mi.Mesh):
         for key, value in buffers.items():
             # The buffer types differ between JIT and scalar variants.
             params[key] = type(params[key])(value.ravel())
-        self._writing_mesh = True
-        try:
+        with own_mesh_updates([self]):
             params.update()
-        finally:
-            self._writing_mesh = False
 
     @property
     def profile_index(self) -> ProfileIndex:
