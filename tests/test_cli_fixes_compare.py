@@ -11,8 +11,9 @@ import pytest
 from conftest import SCENES, VARIANT
 
 from lathe_shape.cli import compare, render
-from lathe_shape.cli.compare import _scene_max_depth, open_comparison, set_mesh_segments
+from lathe_shape.cli.compare import _scene_max_depth, open_comparison
 from lathe_shape.plugin.shape import scene_lathes
+from lathe_shape.tools.scenes import set_mesh_segments
 
 #: Lathes that say nothing of mesh_segments (one self-closing), one with a
 #: literal value, none with a scene default; volpath with its default depth.

@@ -60,51 +60,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def set_mesh_segments(xml_text: str, segments: int, source: str = "scene") -> str:
-    """The scene text with every ``<shape type="lathe">``'s
-    ``<integer name="mesh_segments">`` set to ``segments`` (added where the
-    lathe has none). Only those values change, so that Mitsuba's errors
-    about the edited text give the line and column of the file; raises
-    :class:`~..tools.scenes.SceneSyntaxError` for text that is not
-    well-formed XML."""
-    from xml.parsers import expat
-
-    from ..tools.scenes import _START_TAG, SceneSyntaxError, _with_value, blank_comments
-
-    data = xml_text.encode("utf-8")
-    parser = expat.ParserCreate()
-    lathes: list[list[int | None]] = []  # [start tag offset, mesh_segments tag offset or None]
-    path: list[str] = []  # the open elements, outermost first ("lathe" for a lathe shape)
-
-    def start(name: str, attributes: dict[str, str]) -> None:
-        if path[-1:] == ["lathe"] and attributes.get("name") == "mesh_segments":
-            lathes[-1][1] = parser.CurrentByteIndex
-        is_lathe = name == "shape" and attributes.get("type") == "lathe"
-        if is_lathe:
-            lathes.append([parser.CurrentByteIndex, None])
-        path.append("lathe" if is_lathe else name)
-
-    parser.StartElementHandler = start
-    parser.EndElementHandler = lambda name: path.pop()
-    try:
-        parser.Parse(blank_comments(data), True)
-    except expat.ExpatError as e:
-        raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
-    for lathe, child in reversed(lathes):  # from the end: earlier offsets stay valid
-        if child is not None:
-            tag = _START_TAG.match(data, child)
-            data = data[:tag.start()] + _with_value(tag.group(0), segments) + data[tag.end():]
-            continue
-        tag = _START_TAG.match(data, lathe)
-        added = f'<integer name="mesh_segments" value="{segments}"/>'.encode()
-        if tag.group(2):  # <shape type="lathe" .../>: open it, add the parameter, close it
-            added = b">" + added + b"</shape>"
-            data = data[:tag.end() - 2] + added + data[tag.end():]
-        else:
-            data = data[:tag.end()] + added + data[tag.end():]
-    return data.decode("utf-8")
-
-
 def diverging_map(x: np.ndarray) -> np.ndarray:
     """Blue-white-red map of ``x`` in [-1, 1] -> float RGB in [0, 1]
     (linear blend: -1 blue (0.23, 0.30, 0.75), 0 white, +1 red (0.71, 0.02, 0.15))."""
@@ -189,6 +144,8 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
             extra = {"mesh_segments": str(args.mesh_segments)}
 
         def edit(xml_text: str, path: str) -> str:
+            from ..tools.scenes import set_mesh_segments
+
             return set_mesh_segments(xml_text, args.mesh_segments, path)
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra, edit)
     from ..plugin.shape import scene_lathes  # (needs the variant open_scene selected)

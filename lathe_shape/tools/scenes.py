@@ -24,6 +24,7 @@ __all__ = [
     "replace_profile",
     "scene_integrator",
     "set_film_size",
+    "set_mesh_segments",
 ]
 
 
@@ -68,21 +69,26 @@ def blank_comments(data: bytes) -> bytes:
                   data, flags=re.S)
 
 
-def _film_elements(data: bytes, source: str) -> list[tuple[int, dict[str, int]]]:
-    """Where the films of the UTF-8 scene text ``data`` are: for each
-    ``<film>`` directly inside a ``<sensor>``, the byte offset of its start
-    tag and those of its ``width`` / ``height`` children (by name)."""
+def _elements(data: bytes, source: str, wanted: Callable[[str, dict[str, str], str], bool],
+              children: tuple[str, ...]) -> list[tuple[int, dict[str, int]]]:
+    """Where the elements of the UTF-8 scene text ``data`` are for which
+    ``wanted(name, attributes, parent name)`` holds: for each, the byte
+    offset of its start tag and those of its direct children whose ``name``
+    attribute is one of ``children`` (by that name, the first of each)."""
     data = blank_comments(data)
     parser = expat.ParserCreate()
-    films: list[tuple[int, dict[str, int]]] = []
-    path: list[str] = []  # names of the open elements, outermost first
+    found: list[tuple[int, dict[str, int]]] = []
+    path: list[tuple[str, int]] = []  # the open elements, outermost first: (name, index in found or -1)
 
     def start(name: str, attributes: dict[str, str]) -> None:
-        if name == "film" and path[-1:] == ["sensor"]:
-            films.append((parser.CurrentByteIndex, {}))
-        elif path[-2:] == ["sensor", "film"] and attributes.get("name") in ("width", "height"):
-            films[-1][1].setdefault(attributes["name"], parser.CurrentByteIndex)
-        path.append(name)
+        parent, owner = path[-1] if path else ("", -1)
+        if owner >= 0 and attributes.get("name") in children:
+            found[owner][1].setdefault(attributes["name"], parser.CurrentByteIndex)
+        index = -1
+        if wanted(name, attributes, parent):
+            found.append((parser.CurrentByteIndex, {}))
+            index = len(found) - 1
+        path.append((name, index))
 
     parser.StartElementHandler = start
     parser.EndElementHandler = lambda name: path.pop()
@@ -90,7 +96,7 @@ def _film_elements(data: bytes, source: str) -> list[tuple[int, dict[str, int]]]
         parser.Parse(data, True)
     except expat.ExpatError as e:
         raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
-    return films
+    return found
 
 
 def _with_value(tag: bytes, value: int) -> bytes:
@@ -103,35 +109,53 @@ def _with_value(tag: bytes, value: int) -> bytes:
     return tag[:end].rstrip() + b" " + text + tag[end:]
 
 
-def set_film_size(xml_text: str, size: tuple[int, int], source: str = "scene") -> str:
-    """The scene text with every sensor's film set to ``size`` = (width,
-    height) pixels.
-
-    Only the films' ``width`` / ``height`` values change (an element missing
-    is added on the line of the ``<film>`` tag): every other character,
-    comments and line breaks included, stays where it was, so that Mitsuba's
-    errors about the edited text give the line and column of the file."""
-    data = xml_text.encode("utf-8")
-    films = _film_elements(data, source)
-    if not films:
-        raise SceneError(f"{source}: no <sensor> with a <film> to set the resolution on")
+def _set_integers(data: bytes, elements: list[tuple[int, dict[str, int]]], values: dict[str, int]) -> str:
+    """The UTF-8 scene text ``data`` with, in each of ``elements`` (from
+    :func:`_elements`), the ``<integer>`` children named in ``values`` set
+    to those values; a missing one is added on the line of the element's
+    start tag. Every other character, comments and line breaks included,
+    stays where it was, so that Mitsuba's errors about the edited text give
+    the line and column of the file."""
     edits: list[tuple[int, int, bytes]] = []  # (start, end, replacement) byte ranges
-    for film_start, children in films:
+    for element_start, children in elements:
         missing = b""
-        for name, value in zip(("width", "height"), size, strict=True):
+        for name, value in values.items():
             if name in children:
                 tag = _START_TAG.match(data, children[name])
                 edits.append((tag.start(), tag.end(), _with_value(tag.group(0), value)))
             else:
                 missing += f'<integer name="{name}" value="{value}"/>'.encode()
-        tag = _START_TAG.match(data, film_start)
-        if missing and tag.group(2):  # <film .../>: open it, add the sizes, close it
+        tag = _START_TAG.match(data, element_start)
+        if missing and tag.group(2):  # <tag .../>: open it, add the values, close it
             edits.append((tag.end() - 2, tag.end(), b">" + missing + b"</" + tag.group(1) + b">"))
         elif missing:
             edits.append((tag.end(), tag.end(), missing))
     for start, end, replacement in sorted(edits, reverse=True):
         data = data[:start] + replacement + data[end:]
     return data.decode("utf-8")
+
+
+def set_film_size(xml_text: str, size: tuple[int, int], source: str = "scene") -> str:
+    """The scene text with every sensor's film set to ``size`` = (width,
+    height) pixels: only the films' ``width`` / ``height`` values change
+    (see :func:`_set_integers`)."""
+    data = xml_text.encode("utf-8")
+    films = _elements(data, source, lambda name, _, parent: name == "film" and parent == "sensor",
+                      ("width", "height"))
+    if not films:
+        raise SceneError(f"{source}: no <sensor> with a <film> to set the resolution on")
+    return _set_integers(data, films, dict(zip(("width", "height"), size, strict=True)))
+
+
+def set_mesh_segments(xml_text: str, segments: int, source: str = "scene") -> str:
+    """The scene text with every ``<shape type="lathe">``'s
+    ``<integer name="mesh_segments">`` set to ``segments`` (added where the
+    lathe has none; see :func:`_set_integers`); raises
+    :class:`SceneSyntaxError` for text that is not well-formed XML."""
+    data = xml_text.encode("utf-8")
+    lathes = _elements(data, source, lambda name, attributes, _: name == "shape"
+                       and attributes.get("type") == "lathe", ("mesh_segments",))
+    return _set_integers(data, lathes, {"mesh_segments": segments})
 
 
 def points_text(points) -> str:
