@@ -206,7 +206,8 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
 
             # Emitters seen directly or along a specular chain (area lights
             # hit, the environment on a miss): no other strategy finds them.
-            shown = active & ~(~valid & (depth == 0)) if self.hide_emitters else active
+            # (hidden: the environment seen by the camera ray itself)
+            shown = active & (valid | (depth > 0)) if self.hide_emitters else active
             L += dr.select(shown, weight * si.emitter(scene).eval(si, shown), 0.0)
             vertex = active & valid & (depth + 1 < self.max_depth)
 

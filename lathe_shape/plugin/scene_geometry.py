@@ -40,8 +40,10 @@ recompilation); when other shapes move (through
 ``mi.traverse`` of the original scene, which updates the shared objects in
 place) only the second scene's acceleration structure is rebuilt
 (:meth:`ExactSceneGeometry.refresh`): automatically when a shape's bounding
-box changed, and after :meth:`ExactSceneGeometry.mark_moved` for a move
-that keeps it (say a square floor turned by 90 degrees).
+box changed (or an emitting lathe's transform or profile, see
+:func:`~lathe_shape.plugin.shape.mesh_state`), and after
+:meth:`ExactSceneGeometry.mark_moved` for a move that keeps it (say a square
+floor turned by 90 degrees).
 """
 
 from __future__ import annotations
@@ -73,7 +75,7 @@ class ExactSceneGeometry:
         # No reference to the scene itself: it owns the integrator that owns
         # this object (a cycle through C++ references would never be freed).
         self.fingerprint = self.scene_fingerprint(scene)
-        self.bounds = self.rest_bounds(scene)
+        self.state = self.rest_state(scene)
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = [s for s in scene_lathes(scene) if _exact(s)]
         others = [s for s in shapes if not _exact(s)]
@@ -144,7 +146,7 @@ class ExactSceneGeometry:
         return tuple((shape.ptr, _exact(shape)) for shape in scene.shapes())
 
     @staticmethod
-    def rest_bounds(scene: mi.Scene) -> tuple:
+    def rest_state(scene: mi.Scene) -> tuple:
         """State of the shapes traced by Mitsuba (all but the exact
         lathes; :func:`~.shape.mesh_state`): changes when one is moved or
         edited."""
@@ -153,7 +155,7 @@ class ExactSceneGeometry:
     def matches(self, scene: mi.Scene) -> bool:
         """Whether this geometry is still valid for ``scene``: the same
         shapes, none of the non-lathe ones moved since (lathes may move)."""
-        return self.fingerprint == self.scene_fingerprint(scene) and self.bounds == self.rest_bounds(scene)
+        return self.fingerprint == self.scene_fingerprint(scene) and self.state == self.rest_state(scene)
 
     @classmethod
     def for_scene(cls, scene: mi.Scene, previous: ExactSceneGeometry | None = None) -> ExactSceneGeometry:
@@ -164,22 +166,22 @@ class ExactSceneGeometry:
         if previous is None or previous.fingerprint != cls.scene_fingerprint(scene):
             return cls(scene)
         previous.follow_moves()
-        if previous.bounds == cls.rest_bounds(scene):
+        if previous.state == cls.rest_state(scene):
             return previous
         moved = copy.copy(previous)
         moved.refresh()
-        moved.bounds = cls.rest_bounds(scene)
+        moved.state = cls.rest_state(scene)
         return moved
 
     def accept_moves(self, scene: mi.Scene) -> None:
         """The caller moved non-lathe shapes through ``mi.traverse(self.rest)``
-        (which rebuilt this scene's structure): their new bounds are valid."""
-        self.bounds = self.rest_bounds(scene)
+        (which rebuilt this scene's structure): their new state is valid."""
+        self.state = self.rest_state(scene)
 
     def mark_moved(self) -> None:
         """Non-lathe shapes moved (perhaps keeping their bounds): the next
         :meth:`for_scene` rebuilds their acceleration structure."""
-        self.bounds = None
+        self.state = None
 
     def refresh(self) -> None:
         """Rebuild the acceleration structure of the non-lathe shapes after
