@@ -78,7 +78,7 @@ def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray,
             f"({len(given.points)} (r, z) pairs, as loaded), got {flat.size}"
         )
     points = flat.reshape(-1, 2)
-    labels = [f"{who}, point {k + 1}" for k in range(len(points))]
+    labels = PointLabels.counting(who, len(points))  # "WHO, point 1", ... (built only when read)
     surface = make_surface(given.kind, points, given.sharp, labels, who, given.crease_angle,
                            given.smooth, given.open_sheet)
     return remember_input(surface, points, given.sharp, given.labels, given.source,
