@@ -78,48 +78,54 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
 
 
 def compared_frames(turntable: Turntable, angle: float, spp: int, high_spp: int, reference: np.ndarray,
-                    seed: int = 0) -> dict[str, np.ndarray]:
+                    seed: int = 0, backend: str | None = "oidn") -> dict[str, np.ndarray]:
     """The (H, W, 3) frames :func:`denoise_errors` compares, by name: an
     ``spp`` frame noisy and denoised (with the integrator's guides, the
     albedo guide only, no guides, and the converged guides of the
     ``reference`` render: what better guides could give at most), a frame
-    of 4 x ``spp`` denoised and a ``high_spp`` frame."""
+    of 4 x ``spp`` denoised and a ``high_spp`` frame; with ``backend``
+    None (no denoiser), the noisy frames only."""
     image = turntable.render(angle, spp=spp, seed=seed)
     rgb, albedo, normal = image[..., :3], image[..., 3:6], image[..., 6:9]
+    high = turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3]
+    if backend is None:
+        return {f"noisy_{spp}spp": rgb, f"noisy_{high_spp}spp": high}
     more = turntable.render(angle, spp=4 * spp, seed=seed + 3)
-    denoise = Denoiser("oidn")
+    denoise = Denoiser(backend)
     return {
         f"noisy_{spp}spp": rgb,
         f"denoised_{spp}spp": denoise(rgb, albedo, normal),
         f"denoised_{spp}spp_albedo_only": denoise(rgb, albedo),
         f"denoised_{spp}spp_no_guides": denoise(rgb),
-        f"noisy_{high_spp}spp": turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3],
+        f"noisy_{high_spp}spp": high,
         f"denoised_{spp}spp_reference_guides": denoise(rgb, reference[..., 3:6], reference[..., 6:9]),
         f"denoised_{4 * spp}spp": denoise(more[..., :3], more[..., 3:6], more[..., 6:9]),
     }
 
 
 def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
-                   seed: int = 0, clean_spp: int = 0) -> dict[str, float]:
+                   seed: int = 0, clean_spp: int = 0, backend: str | None = "oidn") -> dict[str, float]:
     """Relative error on the lathe's pixels against a ``reference_spp``
     render of the :func:`compared_frames` (the turntable needs guides), of a
     second, independent ``reference_spp`` render (the reference's own noise,
     part of every error) and, with a nonzero ``clean_spp``, of the same
     frames against a ``clean_spp`` render (names ending ``_vs_<clean_spp>spp``);
     ``denoised_<spp>spp_brightness``: the denoised frame's mean on the lathe
-    over the reference's, minus one."""
+    over the reference's, minus one. ``backend``: the denoiser (None: the
+    noisy frames only)."""
     turntable.pose(angle)
     mask = lathe_mask(turntable)
     reference = turntable.render(angle, spp=reference_spp, seed=seed + 1)
-    frames = compared_frames(turntable, angle, spp, high_spp, reference, seed)
+    frames = compared_frames(turntable, angle, spp, high_spp, reference, seed, backend)
     second = turntable.render(angle, spp=reference_spp, seed=seed + 4)
     frames[f"second_reference_{reference_spp}spp"] = second[..., :3]
     errors: dict[str, float] = {
         name: relative_error(image, reference[..., :3], mask) for name, image in frames.items()
     }
     errors["glass_pixels"] = int(mask.sum())
-    denoised = frames[f"denoised_{spp}spp"]
-    errors[f"denoised_{spp}spp_brightness"] = image_errors(denoised, reference[..., :3], mask)["bias"]
+    if backend is not None:
+        denoised = frames[f"denoised_{spp}spp"]
+        errors[f"denoised_{spp}spp_brightness"] = image_errors(denoised, reference[..., :3], mask)["bias"]
     if clean_spp:
         clean = turntable.render(angle, spp=clean_spp, seed=seed + 5)[..., :3]
         for name, image in frames.items():
@@ -128,12 +134,13 @@ def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, 
 
 
 def flicker(turntable: Turntable, angles: list[float], spp: int, reference_spp: int,
-            denoise: bool = False) -> dict[str, float]:
+            denoise: bool = False, backend: str = "oidn") -> dict[str, float]:
     """Frame-to-frame flicker of each seeding policy over ``angles``: the
     mean absolute difference between consecutive frames' changes and the
     changes of ``reference_spp`` renders of the same poses (what the motion
-    itself changes), relative to the mean of the references."""
-    denoiser = Denoiser("oidn") if denoise else None
+    itself changes), relative to the mean of the references; ``denoise``
+    compares frames denoised by ``backend``."""
+    denoiser = Denoiser(backend) if denoise else None
 
     def frame(angle: float, seed: int, count: int) -> np.ndarray:
         image = turntable.render(angle, spp=count, seed=seed)
@@ -162,25 +169,31 @@ def run_bench(argv: list[str] | None = None) -> int:
 def _bench(args: argparse.Namespace) -> int:
     """The body of :func:`run_bench`."""
     from ..cli.common import select_variant
-    from .denoise import box_filter_xml
+    from .denoise import DenoiseError, box_filter_xml, choose_backend
     from .scenes import load_string_in, set_film_size
 
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
     select_variant(args.variant)
-    times = frame_times(args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    try:
+        backend, note = choose_backend(args.variant)
+    except DenoiseError as e:
+        backend, note = None, f"{e}: the denoised measurements are skipped"
+    print(f"denoiser: {backend or 'none'}" + (f" ({note})" if note else ""))
+    job = (args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
+    times = frame_times(*job, rounds=args.rounds)
     print(f"per frame, {args.resolution}x{args.resolution} {args.spp} spp ({args.variant}): lathe-turntable "
           f"{times['turntable_s'] * 1e3:.1f} ms, bare mi.render {times['render_s'] * 1e3:.1f} ms, "
-          f"ratio {times['ratio']:.2f}")
-    job = (args.scene, args.variant, args.frames, args.spp, args.resolution, defines)
-    times = frame_times(*job, ["--denoise"])
-    print(f"  with --denoise: {times['turntable_s'] * 1e3:.1f} ms per frame, ratio {times['ratio']:.2f}")
+          f"ratio {times['ratio']:.2f}; {args.frames} frames in {times['turntable_s'] * args.frames:.2f} s")
+    if backend is not None:
+        times = frame_times(*job, ["--denoise"], rounds=args.rounds)
+        print(f"  with --denoise: {times['turntable_s'] * 1e3:.1f} ms per frame, ratio {times['ratio']:.2f}")
     with open(args.scene, encoding="utf-8") as f:
         text = set_film_size(box_filter_xml(f.read()), (args.resolution, args.resolution))
     folder = os.path.dirname(os.path.abspath(args.scene))
     values = dict(d.split("=", 1) for d in defines)
     turntable = Turntable(load_string_in(folder, text, **values), guides=True)
     errors = denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp,
-                            clean_spp=args.clean_spp)
+                            clean_spp=args.clean_spp, backend=backend)
     suffix = f"_vs_{args.clean_spp}spp"
     print("relative error on the glass pixels against", args.reference_spp, "spp (box filter):")
     for name, value in errors.items():
@@ -193,8 +206,8 @@ def _bench(args: argparse.Namespace) -> int:
                 print(f"  {name.removesuffix(suffix)}: {value:.4f}")
     world = Turntable(load_string_in(folder, text, **values), "world", guides=True)
     angles = [2.0 * k for k in range(8)]
-    for denoise in (False, True):
-        result = flicker(world, angles, args.spp, args.high_spp, denoise)
+    for denoise in (False, True) if backend is not None else (False,):
+        result = flicker(world, angles, args.spp, args.high_spp, denoise, backend or "oidn")
         print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
               + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
     return 0
@@ -245,6 +258,9 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resolution", type=_square_side, default=128, metavar="NxN",
                         help="frame size, NxN or N (default: 128x128)")
     parser.add_argument("--frames", type=int, default=8, help="frames of the timing run (default: 8)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="alternating timing runs of the turntable and the bare loop, whose medians "
+                             "are compared (default: 3)")
     parser.add_argument("--spp", type=int, default=16, help="samples per pixel of the frames (default: 16)")
     parser.add_argument("--high-spp", type=int, default=256,
                         help="samples per pixel of the high-spp frame and of the flicker run's motion "
