@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import queue
 import signal
 import sys
 import tempfile
@@ -376,7 +377,11 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     fraction of a second even while ``function`` runs a long Dr.Jit kernel.
     The worker then goes on running (a kernel cannot be cancelled):
     :func:`run_command` ends the process after its message. Called outside
-    the main thread, just calls ``function``."""
+    the main thread, just calls ``function``.
+
+    The worker is one long-lived thread (:class:`_Worker`): Dr.Jit sets up
+    per-thread state (on CUDA a stream) for every new thread, a cost a
+    turntable would otherwise pay per frame."""
     if threading.current_thread() is not threading.main_thread():
         return function(*args)
     outcome: dict[str, object] = {}
@@ -392,7 +397,7 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
         finally:
             done.set()
 
-    threading.Thread(target=work, name="lathe-worker", daemon=True).start()
+    _Worker.run(work)
     try:
         while not done.wait(0.1):
             _reclaim_ctrl_c()
@@ -402,6 +407,29 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     if "error" in outcome:
         raise outcome["error"]
     return outcome["value"]
+
+
+class _Worker:
+    """The daemon thread that runs :func:`interruptible`'s calls, in order."""
+
+    _jobs: queue.SimpleQueue[Callable[[], None]] | None = None
+    _lock = threading.Lock()
+
+    @classmethod
+    def run(cls, job: Callable[[], None]) -> None:
+        """Queue ``job`` (which catches its own errors), starting the thread
+        at the first call."""
+        with cls._lock:
+            if cls._jobs is None:
+                cls._jobs = queue.SimpleQueue()
+                threading.Thread(target=cls._serve, args=(cls._jobs,), name="lathe-worker",
+                                 daemon=True).start()
+        cls._jobs.put(job)
+
+    @staticmethod
+    def _serve(jobs: queue.SimpleQueue[Callable[[], None]]) -> None:
+        while True:
+            jobs.get()()
 
 
 def _jit_flags() -> dict[object, bool]:

@@ -116,9 +116,10 @@ def write_frame(frame: Frame, rgb: np.ndarray, metadata: dict[str, object],
                 noisy: np.ndarray | None = None) -> None:
     """Write a frame's half-float EXR (with ``metadata``; ``noisy``, when
     given, as the layer ``noisy``) and sRGB PNG atomically, the EXR last: a
-    frame whose EXR exists is complete."""
+    frame whose EXR exists is complete. The PNG takes zlib's fastest level:
+    a turntable writes hundreds of them."""
     write_images(os.path.splitext(frame.exr)[0], rgb, metadata, half=True,
-                 layers=None if noisy is None else {"noisy": noisy})
+                 layers=None if noisy is None else {"noisy": noisy}, png_compression=1)
 
 
 def frame_pngs(out_dir: str | os.PathLike, count: int) -> list[str]:

@@ -4,6 +4,8 @@ and the one image-error metric every tool, script and test uses."""
 from __future__ import annotations
 
 import os
+import struct
+import zlib
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 
@@ -13,6 +15,7 @@ import OpenEXR
 __all__ = [
     "DEFAULT_CHANNELS",
     "atomic_path",
+    "encode_png",
     "channel_names",
     "image_channel_count",
     "image_errors",
@@ -138,19 +141,45 @@ def to_srgb8(rgb: np.ndarray) -> np.ndarray:
     return np.round(srgb * 255.0).astype(np.uint8)
 
 
-def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    """One PNG chunk: length, type, data, CRC-32 of type and data."""
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+#: PNG colour types by channel count: gray, gray + alpha, RGB, RGBA.
+_PNG_COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}
+
+
+def encode_png(pixels: np.ndarray, compression: int = 6) -> bytes:
+    """An (H, W, C) uint8 image (C = 1 to 4: gray, gray + alpha, RGB, RGBA)
+    as the bytes of an 8-bit PNG file marked sRGB, its scanlines unfiltered
+    and zlib-compressed at level ``compression`` (1: fastest; zlib releases
+    the GIL, so frames encode in parallel threads)."""
+    pixels = _channels(pixels)
+    height, width, count = pixels.shape
+    if pixels.dtype != np.uint8 or count not in _PNG_COLOUR_TYPES:
+        raise ValueError(f"encode_png: need (H, W, 1..4) uint8 pixels, got {pixels.shape} {pixels.dtype}")
+    rows = np.zeros((height, width * count + 1), dtype=np.uint8)  # a filter byte (0: none) per row
+    rows[:, 1:] = pixels.reshape(height, width * count)
+    header = struct.pack(">IIBBBBB", width, height, 8, _PNG_COLOUR_TYPES[count], 0, 0, 0)
+    return b"".join([
+        b"\x89PNG\r\n\x1a\n",
+        _png_chunk(b"IHDR", header),
+        _png_chunk(b"sRGB", b"\x00"),  # rendering intent: perceptual
+        _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), compression)),
+        _png_chunk(b"IEND", b""),
+    ])
+
+
+def write_png(path: str | os.PathLike, rgb: np.ndarray, compression: int = 6) -> None:
     """Write a linear image as an sRGB 8-bit PNG preview: one channel (``Y``)
     gray, two (``Y``, ``A``) gray with alpha, three RGB, four RGB with alpha.
     Mitsuba's films store colour multiplied by alpha; PNG stores it divided
     (straight alpha), so colour is divided by alpha here and alpha is kept
-    linear."""
-    import mitsuba as mi
-
+    linear. ``compression``: zlib level, 1 (fastest) to 9."""
     image = _channels(rgb)
-    formats = {1: mi.Bitmap.PixelFormat.Y, 2: mi.Bitmap.PixelFormat.YA,
-               3: mi.Bitmap.PixelFormat.RGB, 4: mi.Bitmap.PixelFormat.RGBA}
     count = image.shape[-1]
-    if count not in formats:
+    if count not in _PNG_COLOUR_TYPES:
         raise ValueError(f"write_png: an image of {count} channels is not gray, gray-alpha, RGB or RGBA")
     colour = np.asarray(image[..., :3 if count >= 3 else 1], dtype=np.float64)
     pixels = to_srgb8(colour)
@@ -158,25 +187,27 @@ def write_png(path: str | os.PathLike, rgb: np.ndarray) -> None:
         alpha = np.clip(np.nan_to_num(np.asarray(image[..., -1:], dtype=np.float64)), 0.0, 1.0)
         straight = np.divide(colour, alpha, out=np.zeros_like(colour), where=alpha > 0)
         pixels = np.concatenate([to_srgb8(straight), np.round(alpha * 255.0).astype(np.uint8)], axis=-1)
-    mi.Bitmap(np.ascontiguousarray(pixels), pixel_format=formats[count]).write(os.fspath(path))
+    with open(path, "wb") as f:
+        f.write(encode_png(pixels, compression))
 
 
 def write_images(stem: str, rgb: np.ndarray, metadata: dict[str, object] | None = None,
                  png: bool = True, half: bool = False,
                  layers: dict[str, np.ndarray] | None = None,
-                 channels: Sequence[str] | None = None) -> list[str]:
+                 channels: Sequence[str] | None = None, png_compression: int = 6) -> list[str]:
     """Write ``STEM.exr`` (with ``metadata``; every channel of ``rgb``, named
     as in :func:`write_exr`) and, when ``png``, the sRGB preview ``STEM.png``
     of the image's own channels (:func:`image_channel_count`: AOVs are left
     out), each under a temporary name renamed when both are complete (the EXR
     last), so that an interrupted write leaves no partial file; returns the
-    paths written. ``half`` and ``layers`` as in :func:`write_exr`."""
+    paths written. ``half`` and ``layers`` as in :func:`write_exr`;
+    ``png_compression`` as in :func:`write_png`."""
 
     names = channel_names(rgb, channels)
     paths = [stem + ".exr", stem + ".png"] if png else [stem + ".exr"]
     with atomic_path(paths[0]) as tmp_exr, (atomic_path(paths[1]) if png else nullcontext()) as tmp_png:
         if tmp_png:
-            write_png(tmp_png, _channels(rgb)[..., :image_channel_count(names)])
+            write_png(tmp_png, _channels(rgb)[..., :image_channel_count(names)], png_compression)
         write_exr(tmp_exr, rgb, metadata, half, layers, names)
     return paths
 

@@ -1,30 +1,53 @@
-"""A background thread that finishes frames (denoise, EXR and PNG writes)
+"""Background threads that finish frames (denoise, EXR and PNG writes)
 while the next frame renders, so a turntable runs at the speed of the render
 itself.
 
+On a GPU a frame renders in about the time one thread takes to encode it
+(sRGB conversion, ZIP-compressed EXR, PNG), so several ``workers`` share the
+queue; each job writes files of its own, and the encoders release the GIL.
 At most ``depth`` frames wait in the queue, which bounds the memory held and
 makes the renderer wait when the disk (or the denoiser) is the slower one.
 The first error raised by a job is raised again in the rendering thread, at
-its next :meth:`FrameWriter.submit` or at :meth:`FrameWriter.close`.
+its next :meth:`FrameWriter.submit` or at :meth:`FrameWriter.close`; no job
+starts after it.
 """
 
 from __future__ import annotations
 
+import os
 import queue
 import threading
 from collections.abc import Callable
 
-__all__ = ["FrameWriter"]
+__all__ = ["FrameWriter", "default_workers"]
+
+
+#: Memory the frames held by a writer (queued and being written) may take.
+HELD_BYTES = 1 << 30
+
+
+def default_workers(frame_bytes: int = 0) -> int:
+    """Writer threads for frames of ``frame_bytes`` each: up to 4, leaving a
+    core to the renderer's own Python thread, and few enough that the frames
+    held (two per worker) stay within :data:`HELD_BYTES`."""
+    workers = max(1, min(4, (os.cpu_count() or 1) - 1))
+    return max(1, min(workers, HELD_BYTES // max(1, 2 * frame_bytes)))
 
 
 class FrameWriter:
-    """Runs jobs (callables) one after another in a background thread."""
+    """Runs jobs (callables) in ``workers`` background threads (one: in the
+    order submitted), with at most ``depth`` jobs waiting (default: one per
+    worker, and at least 2)."""
 
-    def __init__(self, depth: int = 2) -> None:
-        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=depth)
+    def __init__(self, depth: int | None = None, workers: int = 1) -> None:
+        if workers < 1:
+            raise ValueError(f"FrameWriter needs at least one worker, got {workers}")
+        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=depth or max(2, workers))
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="lathe-frame-writer", daemon=True)
-        self._thread.start()
+        self._threads = [threading.Thread(target=self._run, name=f"lathe-frame-writer-{k}", daemon=True)
+                         for k in range(workers)]
+        for thread in self._threads:
+            thread.start()
 
     def _run(self) -> None:
         while True:
@@ -51,11 +74,13 @@ class FrameWriter:
         self._jobs.put(job)
 
     def close(self) -> None:
-        """Finish the queued jobs and stop the thread; raises the error of a
+        """Finish the queued jobs and stop the threads; raises the error of a
         job, if any."""
-        if self._thread.is_alive():
-            self._jobs.put(None)
-            self._thread.join()
+        running = [thread for thread in self._threads if thread.is_alive()]
+        for _ in running:
+            self._jobs.put(None)  # one stop mark per thread
+        for thread in running:
+            thread.join()
         self._raise()
 
     def __enter__(self) -> FrameWriter:
