@@ -10,6 +10,16 @@ import numpy as np
 import pytest
 
 VARIANT = os.environ.get("LATHE_TEST_VARIANT", "llvm_ad_rgb")
+
+#: Dr.Jit's CUDA backend rounds float32 differently from its LLVM backend:
+#: every division is ``div.approx.ftz`` (up to 2 ulp off), subnormals flush
+#: to zero and the PTX assembler may fuse a multiply and an add. Results
+#: that hold bit for bit on LLVM can differ by an ulp on CUDA, and so can
+#: the rare ray decided by that ulp (README, Known limits).
+CUDA_ROUNDING = pytest.mark.xfail(
+    VARIANT.startswith("cuda"), strict=False,
+    reason="float32 rounding of Dr.Jit's CUDA backend (approximate division, flush to zero, fused "
+           "multiply-add) decides a few vertex-aimed or grazing rays differently")
 mi.set_variant(VARIANT)
 
 import lathe_shape  # noqa: E402,F401  (registers the plugins)

@@ -11,7 +11,7 @@ import pytest
 mi = pytest.importorskip("mitsuba")
 dr = pytest.importorskip("drjit")
 
-from conftest import ROOT  # noqa: E402
+from conftest import CUDA_ROUNDING, ROOT  # noqa: E402
 
 from lathe_shape.kernels import bspline as K  # noqa: E402
 from lathe_shape.kernels.top_level import ProfileTable  # noqa: E402
@@ -163,6 +163,7 @@ def test_walk_on_a_table_of_profiles():
         assert np.array_equal(walked, own)
 
 
+@CUDA_ROUNDING
 @pytest.mark.parametrize("copies", [1, 3])
 def test_lathe_path_walk_through_bspline_has_no_odd_count(copies):
     """Rays walked as lathe_path walks them (spawn_ray past every hit, the

@@ -12,6 +12,7 @@ import sys
 import pytest
 from conftest import ROOT, VARIANT
 
+from lathe_shape.cli.common import DEFAULT_VARIANT
 from lathe_shape.tools import leaks
 from lathe_shape.tools.turntable_bench import bench_parser
 
@@ -72,8 +73,8 @@ def test_leak_test_options(capsys):
     with pytest.raises(SystemExit):
         leaks.leak_test_arguments("polyline", ["--help"])
     text = " ".join(capsys.readouterr().out.split())
-    for option in ("--rays RAYS rays in all (default: 1e6)", f"(default: {VARIANT})", "(default: 250000)",
-                   "(default: 512)", "--random-profiles"):
+    for option in ("--rays RAYS rays in all (default: 1e6)", f"(default: {DEFAULT_VARIANT})",
+                   "(default: 250000)", "(default: 512)", "--random-profiles"):
         assert option in text
     with pytest.raises(SystemExit) as exit_info:
         leaks.leak_test_arguments("bspline", ["--random-profiles"], random_profiles=False)

@@ -73,7 +73,9 @@ def test_scene_geometry_never_reports_lathe_triangles():
     exact = lathe.ray_intersect_exact(ray)
     is_lathe = (si.shape == mi.ShapePtr(lathe)).numpy()
     np.testing.assert_array_equal(is_lathe, exact.is_valid().numpy() & (exact.t <= si.t).numpy())
-    np.testing.assert_allclose(si.t.numpy()[is_lathe], exact.t.numpy()[is_lathe])
+    # Two kernels compute the same t (bit for bit on LLVM; on CUDA the
+    # assembler may fuse a multiply-add in one and not the other: 2 ulp).
+    np.testing.assert_allclose(si.t.numpy()[is_lathe], exact.t.numpy()[is_lathe], rtol=4 * 2.0**-23)
 
 
 def test_furnace_energy_per_policy():

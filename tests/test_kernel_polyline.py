@@ -6,7 +6,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
-from conftest import SCENES
+from conftest import CUDA_ROUNDING, SCENES
 
 from lathe_shape.kernels.polyline import (
     PolylineHit,
@@ -64,6 +64,7 @@ def vertex_distance(prof, p):
     return np.min(np.hypot(pr[:, None] - vr, pz[:, None] - vz), axis=1)
 
 
+@CUDA_ROUNDING
 @pytest.mark.parametrize('name', NAMES)
 def test_against_reference(name):
     """Hit/miss, t, segment and normal agree with brute-force float64."""
@@ -281,6 +282,7 @@ def test_traceable_in_outer_loop():
     assert 1 <= len(hashes) <= 2
 
 
+@CUDA_ROUNDING
 @pytest.mark.parametrize("copies", [1, 3])
 def test_spawn_walk_parity_beats_mesh(copies):
     """Rays walked as lathe_path walks them (spawn_ray past every hit, the

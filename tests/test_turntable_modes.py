@@ -138,6 +138,7 @@ def test_aovs():
 
 
 def test_denoise(tmp_path, capsys):
+    pytest.importorskip("pyoidn")
     out = tmp_path / "turn"
     job = [WINE, "-o", str(out), "--count", "4", "--frames", "1", "--resolution", "48", "-D",
            "integrator=lathe_path", "-D", "max_depth=6", "--denoise", "--mode", "world"]
@@ -171,6 +172,7 @@ def noisy_layer(path) -> np.ndarray:
 
 
 def test_denoiser_choice(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("pyoidn")
     weights = tmp_path / "nvoptix.bin"
     assert dn.choose_backend("llvm_ad_rgb", str(weights)) == ("oidn", "")
     backend, note = dn.choose_backend("cuda_ad_rgb", str(weights))
@@ -188,6 +190,7 @@ def test_denoiser_choice(tmp_path, monkeypatch, capsys):
 
 
 def test_prefiltered_guides_are_closer_to_clean_ones():
+    pytest.importorskip("pyoidn")
     # Smooth guides plus per-pixel noise, as behind glass at few samples.
     y, x = np.mgrid[0:64, 0:64] / 63.0
     albedo = np.stack([0.2 + 0.6 * x, 0.5 + 0.0 * y, 0.8 - 0.5 * y], axis=-1).astype(np.float32)

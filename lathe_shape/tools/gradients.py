@@ -92,7 +92,7 @@ def pixel_classes(scene: mi.Scene, lathe: LatheShape, sub: int = 4,
     ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(x.ravel(), y.ravel()), mi.Point2f(0.5))
     si = ExactSceneGeometry(scene).ray_intersect(mi.Ray3f(ray), mi.Bool(True))
     mine = np.array(si.is_valid() & (si.shape == mi.ShapePtr(lathe))).reshape(height, width, -1)
-    seg = np.where(mine, np.array(si.prim_index).reshape(height, width, -1), -1)
+    seg = np.where(mine, np.array(si.prim_index, dtype=np.int64).reshape(height, width, -1), -1)
     one_segment = mine.all(axis=2) & (seg.min(axis=2) == seg.max(axis=2))
     partial = mine.any(axis=2) & ~mine.all(axis=2)
     return _erode(one_segment), ~_erode(~partial)
