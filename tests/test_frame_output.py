@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lathe_shape.cli.common import interruptible
+from lathe_shape.cli.common import interruptible, one_render_thread
 from lathe_shape.tools.images import encode_png, to_srgb8, write_png
 from lathe_shape.tools.writer import HELD_BYTES, FrameWriter, default_workers
 
@@ -91,7 +91,11 @@ def test_default_workers_bound_the_memory_held():
     assert default_workers(HELD_BYTES // 4) <= 2
 
 
-def test_interruptible_reuses_one_worker_thread():
-    first = interruptible(threading.get_ident)
-    second = interruptible(threading.get_ident)
-    assert first == second != threading.get_ident()
+def test_one_render_thread_runs_every_call_on_one_thread():
+    with one_render_thread():
+        first = interruptible(threading.current_thread)
+        second = interruptible(threading.current_thread)
+    assert first is second and first is not threading.current_thread()
+    first.join(10)  # the thread ends with the block
+    assert not first.is_alive()
+    assert interruptible(threading.current_thread) is not first  # a thread per call again

@@ -76,6 +76,8 @@ def run(capsys, *args: str) -> tuple[int, str, str]:
     """``lathe-turntable ARGS`` in-process, in the test suite's variant."""
     code = main(["--variant", VARIANT, *args])
     captured = capsys.readouterr()
+    if code:
+        print(captured.err)  # (shown with a failing test)
     return code, captured.out, captured.err
 
 

@@ -61,7 +61,8 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TextIO, TypeVar
 
 import numpy as np
@@ -379,9 +380,9 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     :func:`run_command` ends the process after its message. Called outside
     the main thread, just calls ``function``.
 
-    The worker is one long-lived thread (:class:`_Worker`): Dr.Jit sets up
-    per-thread state (on CUDA a stream) for every new thread, a cost a
-    turntable would otherwise pay per frame."""
+    The worker is a new thread per call, or inside :func:`one_render_thread`
+    that block's one thread (Dr.Jit sets up per-thread state, on CUDA a
+    stream, for every new thread: a cost a turntable would pay per frame)."""
     if threading.current_thread() is not threading.main_thread():
         return function(*args)
     outcome: dict[str, object] = {}
@@ -397,7 +398,10 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
         finally:
             done.set()
 
-    _Worker.run(work)
+    if _render_thread is not None:
+        _render_thread.put(work)
+    else:
+        threading.Thread(target=work, name="lathe-worker", daemon=True).start()
     try:
         while not done.wait(0.1):
             _reclaim_ctrl_c()
@@ -409,27 +413,29 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     return outcome["value"]
 
 
-class _Worker:
-    """The daemon thread that runs :func:`interruptible`'s calls, in order."""
+#: The jobs queue of the thread that :func:`one_render_thread` keeps, if any.
+_render_thread: queue.SimpleQueue | None = None
 
-    _jobs: queue.SimpleQueue[Callable[[], None]] | None = None
-    _lock = threading.Lock()
 
-    @classmethod
-    def run(cls, job: Callable[[], None]) -> None:
-        """Queue ``job`` (which catches its own errors), starting the thread
-        at the first call."""
-        with cls._lock:
-            if cls._jobs is None:
-                cls._jobs = queue.SimpleQueue()
-                threading.Thread(target=cls._serve, args=(cls._jobs,), name="lathe-worker",
-                                 daemon=True).start()
-        cls._jobs.put(job)
+@contextmanager
+def one_render_thread() -> Iterator[None]:
+    """Within the block, :func:`interruptible` runs every call on one thread
+    (in order), which ends with the block (after a call abandoned by Ctrl-C,
+    when that call ends)."""
+    global _render_thread
+    previous, jobs = _render_thread, queue.SimpleQueue()
 
-    @staticmethod
-    def _serve(jobs: queue.SimpleQueue[Callable[[], None]]) -> None:
-        while True:
-            jobs.get()()
+    def serve() -> None:
+        while (job := jobs.get()) is not None:
+            job()
+
+    threading.Thread(target=serve, name="lathe-worker", daemon=True).start()
+    _render_thread = jobs
+    try:
+        yield
+    finally:
+        _render_thread = previous
+        jobs.put(None)
 
 
 def _jit_flags() -> dict[object, bool]:

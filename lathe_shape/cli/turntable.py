@@ -313,14 +313,14 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
     thread denoises and writes frame k while frame k + 1 renders."""
     from ..tools.frames import frame_state
     from ..tools.writer import FrameWriter, default_workers
-    from .common import interruptible
+    from .common import interruptible, one_render_thread
 
     if todo:
         progress.show()
     # A rendered frame (float32 RGB, with guides 9 channels), its denoised
     # copy and its encodings: what a worker holds per frame.
     frame_bytes = 4 * job.size[0] * job.size[1] * (12 if job.denoiser is not None else 4)
-    with FrameWriter(workers=default_workers(frame_bytes)) as writer:
+    with one_render_thread(), FrameWriter(workers=default_workers(frame_bytes)) as writer:
         for frame in todo:
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
                 progress.advance(None)
