@@ -78,18 +78,14 @@ def _parse(xml_text: str, source: str) -> ET.Element:
         raise DenoiseError(f"{source}: not a valid XML file ({e})") from None
 
 
-def _box_filters(root: ET.Element) -> None:
-    for film in root.iter("film"):
-        for old in film.findall("rfilter"):
-            film.remove(old)
-        ET.SubElement(film, "rfilter", {"type": "box"})
-
-
 def box_filter_xml(xml_text: str, source: str = "scene") -> str:
     """The scene text with every film's reconstruction filter set to
     ``box`` (the filter a denoiser expects: independent pixel noise)."""
     root = _parse(xml_text, source)
-    _box_filters(root)
+    for film in root.iter("film"):
+        for old in film.findall("rfilter"):
+            film.remove(old)
+        ET.SubElement(film, "rfilter", {"type": "box"})
     return ET.tostring(root, encoding="unicode")
 
 
