@@ -1,11 +1,18 @@
 """OIDN filtering (lathe_shape.tools.denoise): guide prefiltering with the
-guide-only filters and guided denoising of a textured image."""
+guide-only filters and guided denoising of a textured image; the
+multijitter sampler of lathe-turntable --multijitter."""
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
+import xml.etree.ElementTree as ET
 
+import mitsuba as mi
+import numpy as np
+import OpenEXR
+import pytest
+from conftest import SCENES, VARIANT
+
+from lathe_shape.cli.turntable import main
 from lathe_shape.tools import denoise as dn
 
 pytest.importorskip("pyoidn")
@@ -49,3 +56,37 @@ def test_guided_denoising_keeps_the_texture():
     assert guided < 0.7 * blind  # the albedo guide tells texture from noise
     with pytest.raises(dn.DenoiseError, match="unknown denoiser 'nlm'"):
         dn.Denoiser("nlm")
+
+
+
+def test_multijitter_replaces_independent_samplers():
+    scene = ('<scene><sensor><sampler type="independent"><integer name="sample_count" value="$spp"/>'
+             '</sampler><film type="hdrfilm"><rfilter type="gaussian"/></film></sensor>'
+             '<sensor><sampler type="ldsampler"/><film/></sensor><sensor><film/></sensor>'
+             '<sensor><sampler type="$sampler"/></sensor></scene>')
+    root = ET.fromstring(dn.multijitter_xml(scene))
+    sensors = root.findall("sensor")
+    # Independent samplers (named or Mitsuba's default) become multijitter,
+    # with their sample count; a sampler chosen otherwise stays.
+    assert [s.find("sampler").get("type") for s in sensors] == ["multijitter", "ldsampler", "multijitter",
+                                                                "$sampler"]
+    assert sensors[0].find("sampler/integer").attrib == {"name": "sample_count", "value": "$spp"}
+    assert sensors[0].find("film/rfilter").get("type") == "gaussian"  # (box_filter_xml's job)
+    with pytest.raises(dn.DenoiseError, match="glass.xml: not a valid XML file"):
+        dn.multijitter_xml("<scene>", "glass.xml")
+    # multijitter rounds some counts up (to a near-square product): 10 -> 12.
+    sampler = mi.load_dict({"type": "multijitter"})
+    assert (dn.rendered_spp(sampler, 16), dn.rendered_spp(sampler, 10)) == (16, 12)
+
+
+def test_turntable_multijitter_records_the_samples_taken(tmp_path, capsys):
+    out = tmp_path / "turn"
+    code = main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(out), "--count", "4",
+                 "--frames", "0", "--resolution", "16", "--spp", "10", "-D", "integrator=lathe_path",
+                 "-D", "max_depth=4", "--denoise", "--multijitter"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    assert "the MultijitterSampler takes 12 samples per pixel for --spp 10" in printed.err
+    assert "12 spp" in printed.out and "sampler MultijitterSampler, denoised (oidn)" in printed.out
+    with OpenEXR.File(str(out / "frame_0000.exr")) as exr:
+        assert exr.header()["spp"] == 12

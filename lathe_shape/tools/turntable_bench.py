@@ -78,54 +78,73 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
 
 
 def compared_frames(turntable: Turntable, angle: float, spp: int, high_spp: int, reference: np.ndarray,
-                    seed: int = 0, backend: str | None = "oidn") -> dict[str, np.ndarray]:
+                    seed: int = 0, backend: str | None = "oidn",
+                    stratified: Turntable | None = None) -> dict[str, np.ndarray]:
     """The (H, W, 3) frames :func:`denoise_errors` compares, by name: an
     ``spp`` frame noisy and denoised (with the integrator's guides, the
     albedo guide only, no guides, and the converged guides of the
     ``reference`` render: what better guides could give at most), a frame
     of 4 x ``spp`` denoised and a ``high_spp`` frame; with ``backend``
-    None (no denoiser), the noisy frames only."""
+    None (no denoiser), the noisy frames only. A ``stratified`` turntable
+    (the same scene, sampled as by ``lathe-turntable --multijitter``, see
+    :func:`~lathe_shape.tools.denoise.multijitter_xml`) adds its ``spp``
+    frame noisy and denoised (names ending ``_multijitter``)."""
     image = turntable.render(angle, spp=spp, seed=seed)
-    rgb, albedo, normal = image[..., :3], image[..., 3:6], image[..., 6:9]
+    rgb, albedo = image[..., :3], image[..., 3:6]
     high = turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3]
-    if backend is None:
-        return {f"noisy_{spp}spp": rgb, f"noisy_{high_spp}spp": high}
+    denoise = Denoiser(backend) if backend is not None else None
+
+    def guided(frame: np.ndarray) -> np.ndarray:  # denoised with its own guides
+        return denoise(frame[..., :3], frame[..., 3:6], frame[..., 6:9])
+
+    frames = {}
+    if stratified is not None:
+        other = stratified.render(angle, spp=spp, seed=seed)
+        frames[f"noisy_{spp}spp_multijitter"] = other[..., :3]
+        if denoise is not None:
+            frames[f"denoised_{spp}spp_multijitter"] = guided(other)
+            frames[f"denoised_{spp}spp_multijitter_reference_guides"] = denoise(
+                other[..., :3], reference[..., 3:6], reference[..., 6:9])
+    if denoise is None:
+        return {f"noisy_{spp}spp": rgb, f"noisy_{high_spp}spp": high, **frames}
     more = turntable.render(angle, spp=4 * spp, seed=seed + 3)
-    denoise = Denoiser(backend)
     return {
         f"noisy_{spp}spp": rgb,
-        f"denoised_{spp}spp": denoise(rgb, albedo, normal),
+        f"denoised_{spp}spp": guided(image),
         f"denoised_{spp}spp_albedo_only": denoise(rgb, albedo),
         f"denoised_{spp}spp_no_guides": denoise(rgb),
         f"noisy_{high_spp}spp": high,
         f"denoised_{spp}spp_reference_guides": denoise(rgb, reference[..., 3:6], reference[..., 6:9]),
-        f"denoised_{4 * spp}spp": denoise(more[..., :3], more[..., 3:6], more[..., 6:9]),
+        f"denoised_{4 * spp}spp": guided(more),
+        **frames,
     }
 
 
 def denoise_errors(turntable: Turntable, angle: float, spp: int, high_spp: int, reference_spp: int,
-                   seed: int = 0, clean_spp: int = 0, backend: str | None = "oidn") -> dict[str, float]:
+                   seed: int = 0, clean_spp: int = 0, backend: str | None = "oidn",
+                   stratified: Turntable | None = None) -> dict[str, float]:
     """Relative error on the lathe's pixels against a ``reference_spp``
     render of the :func:`compared_frames` (the turntable needs guides), of a
     second, independent ``reference_spp`` render (the reference's own noise,
     part of every error) and, with a nonzero ``clean_spp``, of the same
     frames against a ``clean_spp`` render (names ending ``_vs_<clean_spp>spp``);
     ``denoised_<spp>spp_brightness``: the denoised frame's mean on the lathe
-    over the reference's, minus one. ``backend``: the denoiser (None: the
-    noisy frames only)."""
+    over the reference's, minus one (and ``..._multijitter_brightness``
+    with a ``stratified`` turntable, see :func:`compared_frames`).
+    ``backend``: the denoiser (None: the noisy frames only)."""
     turntable.pose(angle)
     mask = lathe_mask(turntable)
     reference = turntable.render(angle, spp=reference_spp, seed=seed + 1)
-    frames = compared_frames(turntable, angle, spp, high_spp, reference, seed, backend)
+    frames = compared_frames(turntable, angle, spp, high_spp, reference, seed, backend, stratified)
     second = turntable.render(angle, spp=reference_spp, seed=seed + 4)
     frames[f"second_reference_{reference_spp}spp"] = second[..., :3]
     errors: dict[str, float] = {
         name: relative_error(image, reference[..., :3], mask) for name, image in frames.items()
     }
     errors["glass_pixels"] = int(mask.sum())
-    if backend is not None:
-        denoised = frames[f"denoised_{spp}spp"]
-        errors[f"denoised_{spp}spp_brightness"] = image_errors(denoised, reference[..., :3], mask)["bias"]
+    for name in (f"denoised_{spp}spp", f"denoised_{spp}spp_multijitter"):
+        if name in frames:
+            errors[f"{name}_brightness"] = image_errors(frames[name], reference[..., :3], mask)["bias"]
     if clean_spp:
         clean = turntable.render(angle, spp=clean_spp, seed=seed + 5)[..., :3]
         for name, image in frames.items():
@@ -169,7 +188,7 @@ def run_bench(argv: list[str] | None = None) -> int:
 def _bench(args: argparse.Namespace) -> int:
     """The body of :func:`run_bench`."""
     from ..cli.common import select_variant
-    from .denoise import DenoiseError, box_filter_xml, choose_backend
+    from .denoise import DenoiseError, box_filter_xml, choose_backend, multijitter_xml
     from .scenes import load_string_in, set_film_size
 
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
@@ -185,15 +204,19 @@ def _bench(args: argparse.Namespace) -> int:
           f"{times['turntable_s'] * 1e3:.1f} ms, bare mi.render {times['render_s'] * 1e3:.1f} ms, "
           f"ratio {times['ratio']:.2f}; {args.frames} frames in {times['turntable_s'] * args.frames:.2f} s")
     if backend is not None:
-        times = frame_times(*job, ["--denoise"], rounds=args.rounds)
-        print(f"  with --denoise: {times['turntable_s'] * 1e3:.1f} ms per frame, ratio {times['ratio']:.2f}")
+        for extra in (["--denoise"], ["--denoise", "--multijitter"]):
+            times = frame_times(*job, extra, rounds=args.rounds)
+            print(f"  with {' '.join(extra)}: {times['turntable_s'] * 1e3:.1f} ms per frame, "
+                  f"ratio {times['ratio']:.2f}")
     with open(args.scene, encoding="utf-8") as f:
         text = set_film_size(box_filter_xml(f.read()), (args.resolution, args.resolution))
     folder = os.path.dirname(os.path.abspath(args.scene))
     values = dict(d.split("=", 1) for d in defines)
     turntable = Turntable(load_string_in(folder, text, **values), guides=True)
+    # The same frame sampled as by lathe-turntable --multijitter.
+    stratified = Turntable(load_string_in(folder, multijitter_xml(text), **values), guides=True)
     errors = denoise_errors(turntable, 30.0, args.spp, args.high_spp, args.reference_spp,
-                            clean_spp=args.clean_spp, backend=backend)
+                            clean_spp=args.clean_spp, backend=backend, stratified=stratified)
     suffix = f"_vs_{args.clean_spp}spp"
     print("relative error on the glass pixels against", args.reference_spp, "spp (box filter):")
     for name, value in errors.items():
