@@ -202,6 +202,14 @@ def test_resume_skips_finished_frames(tmp_path, capsys):
                           "--spp", "3")
     assert code == 0 and "1 frame(s) of a different job" in stdout and "rendered 1 frame(s)" in stdout
     assert read_exr(out / "frame_0003.exr")[1]["spp"] == 3
+    # So is a frame of another sampler (--multijitter, same spp).
+    code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", "--frames", "3", *FAST[2:],
+                          "--spp", "4")
+    assert code == 0 and "rendered 1 frame(s)" in stdout
+    code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", "--frames", "3", *FAST[2:],
+                          "--spp", "4", "--multijitter")
+    assert code == 0 and "1 frame(s) of a different job" in stdout
+    assert read_exr(out / "frame_0003.exr")[1]["sampler"] == "MultijitterSampler"
     code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", "--frames", "0:2", "--force", *FAST)
     assert code == 0 and "rendered 2 frame(s), skipped 0" in stdout
 

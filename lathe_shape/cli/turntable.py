@@ -191,6 +191,8 @@ class Job:
             "mode": self.turntable.mode,
             "object": self.turntable.object_id,
             "denoiser": "none" if self.denoiser is None else self.denoiser.backend,
+            # (e.g. "MultijitterSampler": --multijitter frames are not another job's)
+            "sampler": str(self.turntable.sensor.sampler()).split("[", 1)[0],
             "variant": self.args.variant,
             "scene": os.path.abspath(self.args.scene),
         }

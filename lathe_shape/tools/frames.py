@@ -39,7 +39,7 @@ __all__ = [
 ]
 
 #: Header attributes a finished frame must match to be skipped on resume.
-JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator", "denoiser")
+JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator", "denoiser", "sampler")
 
 
 @dataclass(frozen=True)
