@@ -1,0 +1,112 @@
+"""Review of frame output at render speed: Ctrl-C while frames are still
+being written, PNG edge cases, memory held by the PNG encoder."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import pytest
+from conftest import SCENES, VARIANT
+
+from lathe_shape.tools.writer import FrameWriter
+
+
+def _ctrl_c_later(delay: float, then: threading.Event | None = None) -> threading.Thread:
+    """A thread that sends SIGINT to the main thread after ``delay`` seconds
+    (as a Ctrl-C in the terminal does), then sets ``then``."""
+    main = threading.main_thread().ident
+
+    def send() -> None:
+        time.sleep(delay)
+        signal.pthread_kill(main, signal.SIGINT)
+        time.sleep(0.2)
+        if then is not None:
+            then.set()
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.fixture
+def python_ctrl_c():
+    """SIGINT raises KeyboardInterrupt in the main thread during the test,
+    its handler installed with SA_RESTART as a Mitsuba render leaves it (a
+    blocking lock wait then does not wake on Ctrl-C)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.siginterrupt(signal.SIGINT, False)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_while_waiting_for_a_free_writer(python_ctrl_c):
+    # The renderer waits for room in the queue (the disk is the slower one):
+    # Ctrl-C interrupts the wait at once, and the queued job is still run.
+    release, ran = threading.Event(), []
+    writer = FrameWriter(workers=1, depth=1)
+    writer.submit(lambda: (release.wait(10), ran.append(0)))
+    writer.submit(lambda: ran.append(1))
+    _ctrl_c_later(0.2)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        writer.submit(lambda: ran.append(2))
+    assert time.monotonic() - start < 2.0
+    release.set()
+    writer.close()
+    assert ran in ([0, 1], [0, 1, 2])
+
+
+def test_ctrl_c_while_closing_lets_the_running_job_finish(python_ctrl_c):
+    # A Ctrl-C while close() waits: the job being written completes (no
+    # half-written file), jobs not started are dropped, then the interrupt
+    # goes on.
+    started, release, ran = threading.Event(), threading.Event(), []
+
+    def slow() -> None:
+        started.set()
+        release.wait(10)
+        ran.append("slow")
+
+    writer = FrameWriter(workers=1, depth=2)
+    writer.submit(slow)
+    writer.submit(lambda: ran.append("queued"))
+    assert started.wait(10)
+    _ctrl_c_later(0.2, then=release)
+    with pytest.raises(KeyboardInterrupt):
+        writer.close()
+    assert ran == ["slow"]
+    assert not any(thread.is_alive() for thread in writer._threads)
+
+
+def test_turntable_ctrl_c_while_last_frames_are_written(tmp_path, capsys, monkeypatch, python_ctrl_c):
+    # Every frame rendered, the command waits for the writers: a Ctrl-C then
+    # must not leave a hidden temporary file or a PNG without its EXR.
+    from lathe_shape.cli.turntable import main
+    from lathe_shape.tools import images
+
+    write_png, calls = images.write_png, []
+
+    def slow_png(*args, **kwargs) -> None:
+        write_png(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == 2:  # (frame 2 rendered and queued: the command waits in close())
+            _ctrl_c_later(0.3)
+        time.sleep(0.6)
+
+    monkeypatch.setattr(images, "write_png", slow_png)
+    out = tmp_path / "turn"
+    code = main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(out), "--count", "3",
+                 "--spp", "1", "--resolution", "16x16", "-D", "mesh_segments=8", "-D", "max_depth=2"])
+    assert code == 130, capsys.readouterr().err
+    names = os.listdir(out)
+    assert not [n for n in names if n.startswith(".")], names
+    exrs = {n[:-4] for n in names if n.endswith(".exr")}
+    assert exrs == {n[:-4] for n in names if n.endswith(".png")} == {"frame_0000", "frame_0001"}
+    monkeypatch.setattr(images, "write_png", write_png)
+    code = main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(out), "--count", "3",
+                 "--spp", "1", "--resolution", "16x16", "-D", "mesh_segments=8", "-D", "max_depth=2"])
+    assert code == 0 and "rendered 1 frame(s), skipped 2" in capsys.readouterr().out
+    assert len(os.listdir(out)) == 6
