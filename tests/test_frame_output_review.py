@@ -8,6 +8,7 @@ import signal
 import threading
 import time
 
+import numpy as np
 import pytest
 from conftest import SCENES, VARIANT
 
@@ -110,3 +111,58 @@ def test_turntable_ctrl_c_while_last_frames_are_written(tmp_path, capsys, monkey
                  "--spp", "1", "--resolution", "16x16", "-D", "mesh_segments=8", "-D", "max_depth=2"])
     assert code == 0 and "rendered 1 frame(s), skipped 2" in capsys.readouterr().out
     assert len(os.listdir(out)) == 6
+
+
+# -- PNG edge cases -------------------------------------------------------------
+
+
+def test_png_refuses_images_it_cannot_store(tmp_path):
+    from lathe_shape.tools.images import encode_png, write_png
+
+    # PNG has no empty image (libpng refuses an IHDR with a zero side).
+    for shape in [(0, 4, 3), (4, 0, 3)]:
+        with pytest.raises(ValueError, match="H and W at least 1"):
+            encode_png(np.zeros(shape, dtype=np.uint8))
+        with pytest.raises(ValueError, match="H and W at least 1"):
+            write_png(tmp_path / "empty.png", np.zeros(shape, dtype=np.float32))
+    with pytest.raises(ValueError, match=r"need an \(H, W\) or \(H, W, C\) image"):
+        write_png(tmp_path / "4d.png", np.zeros((2, 2, 3, 1)))
+    assert not list(tmp_path.iterdir())  # nothing written for a refused image
+
+
+def test_png_carries_gamma_and_chromaticities_for_readers_without_srgb(tmp_path):
+    # (as Mitsuba's PNG writer did before: the PNG specification asks for
+    # gAMA and cHRM next to sRGB)
+    from PIL import Image
+
+    from lathe_shape.tools.images import write_png
+
+    write_png(tmp_path / "a.png", np.full((2, 3, 3), 0.5, dtype=np.float32), compression=1)
+    with Image.open(tmp_path / "a.png") as image:
+        assert image.info["gamma"] == pytest.approx(1 / 2.2, abs=1e-5)
+        assert image.info["chromaticity"] == pytest.approx((0.3127, 0.329, 0.64, 0.33, 0.3, 0.6, 0.15, 0.06))
+        assert "srgb" in image.info
+
+
+def test_write_png_memory_stays_near_the_8_bit_image(tmp_path):
+    # The sRGB conversion runs in float64: over a whole frame its
+    # temporaries took over 100 bytes per pixel, per writer thread (a 4K
+    # frame: 1 GB each). Converted in bands, the 8-bit image and its
+    # encodings dominate.
+    import tracemalloc
+
+    from lathe_shape.tools.images import to_srgb8, write_png
+
+    height, width = 1024, 4096
+    linear = np.linspace(0.0, 1.0, height * width * 3, dtype=np.float32).reshape(height, width, 3)
+    tracemalloc.start()
+    try:
+        write_png(tmp_path / "big.png", linear, compression=1)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 24 * height * width, f"{peak / (height * width):.1f} bytes per pixel"
+    from PIL import Image
+
+    with Image.open(tmp_path / "big.png") as image:
+        assert np.array_equal(np.asarray(image)[::97], to_srgb8(linear[::97]))

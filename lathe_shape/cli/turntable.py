@@ -317,9 +317,10 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
 
     if todo:
         progress.show()
-    # A rendered frame (float32 RGB, with guides 9 channels), its denoised
-    # copy and its encodings: what a worker holds per frame.
-    frame_bytes = 4 * job.size[0] * job.size[1] * (12 if job.denoiser is not None else 4)
+    # What a worker holds per frame: the rendered float32 channels (RGB,
+    # with guides 9), the denoised copy, and the encoders' buffers (8-bit
+    # pixels, their compressed copies, half-float EXR channels: ~24 bytes).
+    frame_bytes = job.size[0] * job.size[1] * (4 * (12 if job.denoiser is not None else 3) + 24)
     with one_render_thread(), FrameWriter(workers=default_workers(frame_bytes)) as writer:
         for frame in todo:
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
