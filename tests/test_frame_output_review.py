@@ -166,3 +166,15 @@ def test_write_png_memory_stays_near_the_8_bit_image(tmp_path):
 
     with Image.open(tmp_path / "big.png") as image:
         assert np.array_equal(np.asarray(image)[::97], to_srgb8(linear[::97]))
+
+
+def test_default_workers_count_the_cores_this_process_may_use(monkeypatch):
+    # A batch job given 2 cores of a 64-core node: one writer, not four
+    # threads competing with the renderer for those 2 cores.
+    from lathe_shape.tools import writer
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    assert writer.default_workers() == 1
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(16)), raising=False)
+    assert writer.default_workers() == 4

@@ -38,8 +38,11 @@ _POLL_SECONDS = 0.1
 def default_workers(frame_bytes: int = 0) -> int:
     """Writer threads for frames of ``frame_bytes`` each: up to 4, leaving a
     core to the renderer's own Python thread, and few enough that the frames
-    held (two per worker) stay within :data:`HELD_BYTES`."""
-    workers = max(1, min(4, (os.cpu_count() or 1) - 1))
+    held (two per worker) stay within :data:`HELD_BYTES`. The cores are
+    those this process may run on (a batch job or ``taskset`` may allow a
+    few of the machine's)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = max(1, min(4, (cores or 1) - 1))
     return max(1, min(workers, HELD_BYTES // max(1, 2 * frame_bytes)))
 
 
