@@ -317,10 +317,11 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
 
     if todo:
         progress.show()
-    # What a worker holds per frame: the rendered float32 channels (RGB,
-    # with guides 9), the denoised copy, and the encoders' buffers (8-bit
-    # pixels, their compressed copies, half-float EXR channels: ~24 bytes).
-    frame_bytes = job.size[0] * job.size[1] * (4 * (12 if job.denoiser is not None else 3) + 24)
+    # Per frame a worker holds (one written, one queued): the rendered
+    # float32 channels (RGB, with guides 9) and the denoised copy, and for
+    # the frame being written the encoders' buffers (8-bit pixels and their
+    # compressed copy, half-float EXR channels: ~24 bytes per pixel).
+    frame_bytes = job.size[0] * job.size[1] * (4 * (12 if job.denoiser is not None else 3) + 24 // 2)
     with one_render_thread(), FrameWriter(workers=default_workers(frame_bytes)) as writer:
         for frame in todo:
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
