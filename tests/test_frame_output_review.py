@@ -178,3 +178,28 @@ def test_default_workers_count_the_cores_this_process_may_use(monkeypatch):
     assert writer.default_workers() == 1
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(16)), raising=False)
     assert writer.default_workers() == 4
+
+
+def test_ctrl_c_wakes_a_blocking_wait_after_a_render():
+    # Mitsuba's render puts Python's SIGINT handler back with SA_RESTART: a
+    # blocking wait of the main thread then slept through Ctrl-C (here for
+    # 3 s, in a turntable until the next frame was written).
+    import mitsuba as mi
+
+    from lathe_shape.cli.common import interruptible
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct"}, "sensor": {
+            "type": "perspective", "film": {"type": "hdrfilm", "width": 2, "height": 2}}})
+        interruptible(lambda: mi.render(scene, spp=1).numpy())
+        held = threading.Lock()
+        held.acquire()
+        threading.Timer(3.0, held.release).start()
+        _ctrl_c_later(0.2)
+        start = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            held.acquire()
+        assert time.monotonic() - start < 2.0
+    finally:
+        signal.signal(signal.SIGINT, previous)
