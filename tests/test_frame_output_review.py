@@ -203,3 +203,21 @@ def test_ctrl_c_wakes_a_blocking_wait_after_a_render():
         assert time.monotonic() - start < 2.0
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def test_repeated_in_process_turntables_leave_no_thread(tmp_path, capsys, monkeypatch):
+    # Every job's render thread and writer threads end with the job.
+    from lathe_shape.cli.turntable import main
+    from lathe_shape.tools import writer
+
+    monkeypatch.setattr(writer, "default_workers", lambda frame_bytes=0: 3)
+    before = threading.active_count()
+    for k in range(12):
+        assert main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(tmp_path / f"t{k % 2}"),
+                     "--count", "3", "--force", "--spp", "1", "--resolution", "8x8", "-D", "mesh_segments=8",
+                     "-D", "max_depth=2"]) == 0
+    capsys.readouterr()
+    deadline = time.monotonic() + 10
+    while threading.active_count() > before and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert threading.active_count() == before, [t.name for t in threading.enumerate()]
