@@ -221,3 +221,25 @@ def test_repeated_in_process_turntables_leave_no_thread(tmp_path, capsys, monkey
     while threading.active_count() > before and time.monotonic() < deadline:
         time.sleep(0.05)
     assert threading.active_count() == before, [t.name for t in threading.enumerate()]
+
+
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device", "/x/.frame_0000.1.tmp.png"),
+                                   RuntimeError("Failed to write pixel data to image file")])
+def test_turntable_write_error_names_the_frame_and_folder(tmp_path, capsys, monkeypatch, error):
+    # One line naming the frame and the folder (not the hidden temporary
+    # file); OpenEXR's RuntimeError is a write error too.
+    from lathe_shape.cli import turntable
+    from lathe_shape.tools import frames
+
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(frames, "write_images", fail)
+    out = tmp_path / "turn"
+    code = turntable.main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(out),
+                           "--count", "2", "--spp", "1", "--resolution", "8x8", "-D", "mesh_segments=8",
+                           "-D", "max_depth=2"])
+    err = capsys.readouterr().err
+    assert code == 2
+    reason = "No space left on device" if isinstance(error, OSError) else str(error)
+    assert err.splitlines()[-1] == f"lathe-turntable: error: cannot write frame 0 to {out}: {reason}"

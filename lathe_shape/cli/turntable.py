@@ -303,8 +303,11 @@ def finish_frame(job: Job, frame: Frame, image: np.ndarray, seconds: float,
     rgb, noisy = cleaned or clean_frame(job, image)
     try:
         write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)}, noisy=noisy)
-    except OSError as e:
-        raise CliError(f"cannot write frame: {e}") from None
+    except (OSError, RuntimeError) as e:  # (OpenEXR reports a failed write as RuntimeError)
+        # The reason without the hidden temporary file's name when there is one.
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        raise CliError(f"cannot write frame {frame.index} to {os.path.dirname(frame.exr) or '.'}: "
+                       f"{reason}") from None
 
 
 def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
