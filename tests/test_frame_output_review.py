@@ -82,6 +82,19 @@ def test_ctrl_c_while_closing_lets_the_running_job_finish(python_ctrl_c):
     assert not any(thread.is_alive() for thread in writer._threads)
 
 
+def test_second_ctrl_c_stops_waiting_for_a_hung_write(python_ctrl_c):
+    release = threading.Event()
+    writer = FrameWriter(workers=1)
+    writer.submit(lambda: release.wait(10))
+    _ctrl_c_later(0.2)
+    _ctrl_c_later(0.6)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        writer.close()
+    assert time.monotonic() - start < 3.0
+    release.set()
+
+
 def test_turntable_ctrl_c_while_last_frames_are_written(tmp_path, capsys, monkeypatch, python_ctrl_c):
     # Every frame rendered, the command waits for the writers: a Ctrl-C then
     # must not leave a hidden temporary file or a PNG without its EXR.

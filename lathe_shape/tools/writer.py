@@ -16,7 +16,8 @@ blocking wait: after a Mitsuba render Python's SIGINT handler is installed
 with ``SA_RESTART`` (Mitsuba restores it so), and a blocking lock wait then
 does not wake on Ctrl-C until the lock is free, seconds later. A Ctrl-C
 while :meth:`FrameWriter.close` waits lets the jobs being run finish (no
-half-written file is left), drops those not started, and is raised then.
+half-written file is left), drops those not started, and is raised then (a
+second one stops the wait).
 """
 
 from __future__ import annotations
@@ -103,8 +104,9 @@ class FrameWriter:
 
     def close(self) -> None:
         """Finish the queued jobs and stop the threads; raises the error of a
-        job, if any. On Ctrl-C meanwhile, waits only for the jobs running
-        (further Ctrl-C ignored) and raises KeyboardInterrupt."""
+        job, if any. On Ctrl-C meanwhile, waits only for the jobs running,
+        then raises KeyboardInterrupt (at once on a second Ctrl-C: a write
+        that hangs, on a network disk say, must not hold the command)."""
         stop_marks = sum(not stopped.is_set() for stopped in self._stopped)
         interrupt: KeyboardInterrupt | None = None
         while True:
@@ -115,7 +117,9 @@ class FrameWriter:
                 self._wait()
                 break
             except KeyboardInterrupt as e:
-                interrupt, self._dropping = interrupt or e, True
+                if interrupt is not None:  # a second Ctrl-C: a write hangs, stop waiting
+                    raise
+                interrupt, self._dropping = e, True
         if interrupt is not None:
             raise interrupt
         self._raise()
