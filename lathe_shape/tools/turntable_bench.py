@@ -173,13 +173,11 @@ def run_bench(argv: list[str] | None = None) -> int:
 
 def _bench(args: argparse.Namespace) -> int:
     """The body of :func:`run_bench`."""
-    from ..cli.common import check_at_least, select_variant
+    from ..cli.common import select_variant
     from .denoise import DenoiseError, box_filter_xml, choose_backend
     from .scenes import load_string_in, set_film_size
 
-    for option, minimum in [("--frames", 1), ("--rounds", 1), ("--spp", 1), ("--high-spp", 1),
-                            ("--reference-spp", 1), ("--clean-spp", 0)]:
-        check_at_least(option, getattr(args, option[2:].replace("-", "_")), minimum)
+    _check_counts(args)
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
     select_variant(args.variant)
     try:
@@ -219,6 +217,15 @@ def _bench(args: argparse.Namespace) -> int:
         print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
               + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
     return 0
+
+
+def _check_counts(args: argparse.Namespace) -> None:
+    """The counts of frames, rounds and samples, each at least 1 (``--clean-spp``: 0)."""
+    from ..cli.common import check_at_least
+
+    for option, minimum in [("--frames", 1), ("--rounds", 1), ("--spp", 1), ("--high-spp", 1),
+                            ("--reference-spp", 1), ("--clean-spp", 0)]:
+        check_at_least(option, getattr(args, option[2:].replace("-", "_")), minimum)
 
 
 #: The default scene: the wine glass in the repository's scenes folder,
