@@ -98,9 +98,10 @@ class FrameWriter:
     def _wait(self) -> None:
         """Wait in short steps until every thread has stopped (an
         interrupted ``Thread.join`` marks a running thread stopped)."""
-        for stopped in self._stopped:
+        for thread, stopped in zip(self._threads, self._stopped, strict=True):
             while not stopped.wait(_POLL_SECONDS):
                 pass
+            thread.join()  # (at once: the thread is returning)
 
     def close(self) -> None:
         """Finish the queued jobs and stop the threads; raises the error of a
