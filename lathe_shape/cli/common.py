@@ -408,6 +408,10 @@ def interruptible(function: Callable[..., _Result], *args: object) -> _Result:
     except BaseException:
         _unfinished_work.append(done)
         raise
+    # Mitsuba puts Python's handler back when its render ends, but with
+    # SA_RESTART: a blocking wait (a lock, a full queue) would then sleep
+    # through Ctrl-C.
+    _reclaim_ctrl_c()
     if "error" in outcome:
         raise outcome["error"]
     return outcome["value"]

@@ -331,8 +331,11 @@ def finish_frame(job: Job, frame: Frame, image: np.ndarray, seconds: float,
     rgb, noisy = cleaned or clean_frame(job, image)
     try:
         write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)}, noisy=noisy)
-    except OSError as e:
-        raise CliError(f"cannot write frame: {e}") from None
+    except (OSError, RuntimeError) as e:  # (OpenEXR reports a failed write as RuntimeError)
+        # The reason without the hidden temporary file's name when there is one.
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        raise CliError(f"cannot write frame {frame.index} to {os.path.dirname(frame.exr) or '.'}: "
+                       f"{reason}") from None
 
 
 def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
@@ -345,9 +348,11 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
 
     if todo:
         progress.show()
-    # A rendered frame (float32 RGB, with guides 9 channels), its denoised
-    # copy and its encodings: what a worker holds per frame.
-    frame_bytes = 4 * job.size[0] * job.size[1] * (12 if job.denoiser is not None else 4)
+    # Per frame a worker holds (one written, one queued): the rendered
+    # float32 channels (RGB, with guides 9) and the denoised copy, and for
+    # the frame being written the encoders' buffers (8-bit pixels and their
+    # compressed copy, half-float EXR channels: ~24 bytes per pixel).
+    frame_bytes = job.size[0] * job.size[1] * (4 * (12 if job.denoiser is not None else 3) + 24 // 2)
     with one_render_thread(), FrameWriter(workers=default_workers(frame_bytes)) as writer:
         for frame in todo:
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":

@@ -148,27 +148,54 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
 
 #: PNG colour types by channel count: gray, gray + alpha, RGB, RGBA.
 _PNG_COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}
+#: The chunks that mark a PNG as sRGB: ``sRGB`` (rendering intent
+#: perceptual), and for readers that do not know it ``gAMA`` (1 / 2.2, in
+#: units of 1e-5) and ``cHRM`` (the sRGB white point and primaries, x and y
+#: in units of 1e-5), as the PNG specification recommends.
+_PNG_SRGB_CHUNKS = [
+    (b"sRGB", b"\x00"),
+    (b"gAMA", struct.pack(">I", 45455)),
+    (b"cHRM", struct.pack(">8I", 31270, 32900, 64000, 33000, 30000, 60000, 15000, 6000)),
+]
+#: Pixels :func:`write_png` converts at a time: its float64 temporaries then
+#: take a few MB, not dozens of bytes per pixel of the whole image (a
+#: turntable encodes several frames at once).
+_PNG_BAND_PIXELS = 1 << 18
 
 
 def encode_png(pixels: np.ndarray, compression: int = 6) -> bytes:
-    """An (H, W, C) uint8 image (C = 1 to 4: gray, gray + alpha, RGB, RGBA)
-    as the bytes of an 8-bit PNG file marked sRGB, its scanlines unfiltered
-    and zlib-compressed at level ``compression`` (1: fastest; zlib releases
-    the GIL, so frames encode in parallel threads)."""
+    """An (H, W, C) uint8 image (C = 1 to 4: gray, gray + alpha, RGB, RGBA;
+    H, W at least 1) as the bytes of an 8-bit PNG file marked sRGB, its
+    scanlines unfiltered and zlib-compressed at level ``compression`` (1:
+    fastest; zlib releases the GIL, so frames encode in parallel threads)."""
     pixels = _channels(pixels)
+    if pixels.dtype != np.uint8 or pixels.ndim != 3 or pixels.shape[2] not in _PNG_COLOUR_TYPES \
+            or 0 in pixels.shape:
+        raise ValueError(f"encode_png: need (H, W, 1..4) uint8 pixels, H and W at least 1, "
+                         f"got {pixels.shape} {pixels.dtype}")
     height, width, count = pixels.shape
-    if pixels.dtype != np.uint8 or count not in _PNG_COLOUR_TYPES:
-        raise ValueError(f"encode_png: need (H, W, 1..4) uint8 pixels, got {pixels.shape} {pixels.dtype}")
     rows = np.zeros((height, width * count + 1), dtype=np.uint8)  # a filter byte (0: none) per row
     rows[:, 1:] = pixels.reshape(height, width * count)
     header = struct.pack(">IIBBBBB", width, height, 8, _PNG_COLOUR_TYPES[count], 0, 0, 0)
     return b"".join([
         b"\x89PNG\r\n\x1a\n",
         _png_chunk(b"IHDR", header),
-        _png_chunk(b"sRGB", b"\x00"),  # rendering intent: perceptual
-        _png_chunk(b"IDAT", zlib.compress(rows.tobytes(), compression)),
+        *(_png_chunk(kind, data) for kind, data in _PNG_SRGB_CHUNKS),
+        _png_chunk(b"IDAT", zlib.compress(rows, compression)),
         _png_chunk(b"IEND", b""),
     ])
+
+
+def _png_pixels(image: np.ndarray) -> np.ndarray:
+    """The 8-bit sRGB pixels of an (H, W, 1..4) linear image (see
+    :func:`write_png`)."""
+    count = image.shape[-1]
+    colour = np.asarray(image[..., :3 if count >= 3 else 1], dtype=np.float64)
+    if count not in (2, 4):
+        return to_srgb8(colour)
+    alpha = np.clip(np.nan_to_num(np.asarray(image[..., -1:], dtype=np.float64)), 0.0, 1.0)
+    straight = np.divide(colour, alpha, out=np.zeros_like(colour), where=alpha > 0)
+    return np.concatenate([to_srgb8(straight), np.round(alpha * 255.0).astype(np.uint8)], axis=-1)
 
 
 def write_png(path: str | os.PathLike, rgb: np.ndarray, compression: int = 6) -> None:
@@ -181,14 +208,15 @@ def write_png(path: str | os.PathLike, rgb: np.ndarray, compression: int = 6) ->
     count = image.shape[-1]
     if count not in _PNG_COLOUR_TYPES:
         raise ValueError(f"write_png: an image of {count} channels is not gray, gray-alpha, RGB or RGBA")
-    colour = np.asarray(image[..., :3 if count >= 3 else 1], dtype=np.float64)
-    pixels = to_srgb8(colour)
-    if count in (2, 4):
-        alpha = np.clip(np.nan_to_num(np.asarray(image[..., -1:], dtype=np.float64)), 0.0, 1.0)
-        straight = np.divide(colour, alpha, out=np.zeros_like(colour), where=alpha > 0)
-        pixels = np.concatenate([to_srgb8(straight), np.round(alpha * 255.0).astype(np.uint8)], axis=-1)
+    if image.ndim != 3:
+        raise ValueError(f"write_png: need an (H, W) or (H, W, C) image, got shape {image.shape}")
+    pixels = np.empty(image.shape, dtype=np.uint8)
+    band = max(1, _PNG_BAND_PIXELS // max(1, image.shape[1]))  # rows converted at a time
+    for top in range(0, image.shape[0], band):
+        pixels[top:top + band] = _png_pixels(image[top:top + band])
+    data = encode_png(pixels, compression)
     with open(path, "wb") as f:
-        f.write(encode_png(pixels, compression))
+        f.write(data)
 
 
 def write_images(stem: str, rgb: np.ndarray, metadata: dict[str, object] | None = None,

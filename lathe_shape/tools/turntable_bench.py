@@ -46,9 +46,12 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
                 defines: list[str], extra: list[str] = (), rounds: int = 3) -> dict[str, float]:
     """Seconds per frame: ``lathe-turntable`` in-process (posing, render,
     transfer, denoising and writes) and a bare ``mi.render`` loop over the
-    same orbit poses, alternating ``rounds`` times (the median of the rounds
-    for each: timings on a shared machine drift); ``ratio`` is the first
-    over the second."""
+    same orbit poses, alternating ``rounds`` times after one uncounted round
+    (it compiles the kernels of both: a first pose alone does not, the
+    turned transforms make kernels of their own), the median of the rounds
+    for each (timings on a shared machine drift); ``ratio`` is the first
+    over the second. A failing ``lathe-turntable`` raises its message."""
+    from ..cli.common import CliError
     from ..cli.turntable import main
     from .scenes import load_scene
 
@@ -56,23 +59,25 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
     values = dict(d.split("=", 1) for d in defines)
     turntable = Turntable(load_scene(scene_path, values, (resolution, resolution)))
     cli, bare = [], []
-    output = io.StringIO()
-    with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stdout(output), \
-            contextlib.redirect_stderr(io.StringIO()):
+    with tempfile.TemporaryDirectory() as folder:
         job = [scene_path, "--variant", variant, "--count", str(frames), "--spp", str(spp),
                "--resolution", f"{resolution}x{resolution}", "-o", folder, "--force", *define_args, *extra]
-        main([*job, "--frames", "0"])  # compiles the kernels
-        turntable.render(0.0, spp=spp)
-        for _ in range(rounds):
-            main(job)
-            # The command's own time for its frame loop (writes included).
-            cli.append(float(re.findall(r" in ([0-9.]+) s", output.getvalue())[-1]) / frames)
+        for counted in [False] + [True] * rounds:
+            output, errors = io.StringIO(), io.StringIO()
+            with contextlib.redirect_stdout(output), contextlib.redirect_stderr(errors):
+                status = main(job)
+            if status != 0:
+                raise CliError(errors.getvalue().strip().splitlines()[-1] if errors.getvalue().strip()
+                               else f"lathe-turntable exited with status {status}")
             start = time.perf_counter()
             for k in range(frames):
                 turntable.pose(360.0 * k / frames)
                 dr.eval(mi.render(turntable.scene, spp=spp, seed=0, integrator=turntable.integrator))
                 dr.sync_thread()
-            bare.append((time.perf_counter() - start) / frames)
+            if counted:
+                bare.append((time.perf_counter() - start) / frames)
+                # The command's own time for its frame loop (writes included).
+                cli.append(float(re.findall(r" in ([0-9.]+) s", output.getvalue())[-1]) / frames)
     cli_s, bare_s = float(np.median(cli)), float(np.median(bare))
     return {"turntable_s": cli_s, "render_s": bare_s, "ratio": cli_s / bare_s}
 
@@ -191,6 +196,7 @@ def _bench(args: argparse.Namespace) -> int:
     from .denoise import DenoiseError, box_filter_xml, choose_backend, multijitter_xml
     from .scenes import load_string_in, set_film_size
 
+    _check_counts(args)
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
     select_variant(args.variant)
     try:
@@ -234,6 +240,15 @@ def _bench(args: argparse.Namespace) -> int:
         print(f"flicker of a world turn (2 deg steps, {args.spp} spp{', denoised' if denoise else ''}): "
               + ", ".join(f"seeds={k} {v:.4f}" for k, v in result.items()))
     return 0
+
+
+def _check_counts(args: argparse.Namespace) -> None:
+    """The counts of frames, rounds and samples, each at least 1 (``--clean-spp``: 0)."""
+    from ..cli.common import check_at_least
+
+    for option, minimum in [("--frames", 1), ("--rounds", 1), ("--spp", 1), ("--high-spp", 1),
+                            ("--reference-spp", 1), ("--clean-spp", 0)]:
+        check_at_least(option, getattr(args, option[2:].replace("-", "_")), minimum)
 
 
 #: The default scene: the wine glass in the repository's scenes folder,
