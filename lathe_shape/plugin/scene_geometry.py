@@ -57,7 +57,9 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.common import NO_CROSSING, opaque
+from ..kernels.polyline import walk_and_test_polyline
 from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
+from ..surfaces import PolylineSurface
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
 from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
@@ -225,13 +227,31 @@ class ExactSceneGeometry:
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
                            coherent: mi.Bool | bool = False) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
         """Nearest surface interaction along ``ray``, a ray that may go on
+        along the line of ``walk`` past its last lathe crossing: see
+        :meth:`walk_and_test`, which this is without a shadow ray."""
+        si, walk, _ = self.walk_and_test(ray, active, walk, coherent)
+        return si, walk
+
+    def walk_and_test(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
+                      coherent: mi.Bool | bool = False, shadow: mi.Ray3f | None = None,
+                      shadow_active: mi.Bool | None = None
+                      ) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
+        """Nearest surface interaction along ``ray``, a ray that may go on
         along the line of ``walk`` past its last lathe crossing (see
         :mod:`~lathe_shape.plugin.line_walk`): where it does, the lathes
         are queried on that line for the crossing after the one taken (no
         offset, none skipped or found twice); elsewhere as
-        :meth:`ray_intersect` (``coherent`` too). Returns the interaction
-        (``t`` along ``ray``) and the walk to pass with the next ray."""
+        :meth:`ray_intersect` (``coherent`` too). With ``shadow``, also
+        :meth:`ray_test` of that ray (lanes ``shadow_active``): a single
+        polyline lathe then answers both rays with one traced traversal
+        (:func:`_walk_and_test_lathe`), compiled once instead of twice,
+        which shortens a render's first, uncached compilation. Returns the
+        interaction (``t`` along ``ray``), the walk to pass with the next
+        ray and whether ``shadow`` is occluded (False without it)."""
         self.follow_moves()
+        occluded = mi.Bool(False)  # the shadow ray is blocked
+        if shadow is not None:
+            occluded = self.rest.ray_test(shadow, shadow_active)
         same = mi.Bool(active) & continues_line(ray, walk)
         line = mi.Ray3f(ray)
         line.o = dr.select(same, walk.o, ray.o)
@@ -258,8 +278,13 @@ class ExactSceneGeometry:
         for index, lathe in enumerate(self.single):
             line.maxt = t0 + dr.minimum(ray.maxt, si.t)
             mine = after.lathe == index
-            si_lathe, s, key = lathe.next_crossing_exact(
-                line, active, dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING), t0)
+            after_s, after_key = dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING)
+            if shadow is None:
+                si_lathe, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, t0)
+            else:
+                si_lathe, s, key, blocked = _walk_and_test_lathe(
+                    lathe, line, active, after_s, after_key, t0, shadow, shadow_active & ~occluded)
+                occluded |= blocked
             place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
             # (the margin holds against the rest only: between lathes the
             # nearer crossing wins, else one could be lost for good)
@@ -270,7 +295,9 @@ class ExactSceneGeometry:
             si_group, place = group.ray_walk(line, active, after)
             si, walk, take = _nearer(si, walk, si_group, place, t0, dr.select(won, 0.0, margin))
             won |= take
-        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
+            if shadow is not None:
+                occluded |= group.set.occluded(shadow.o, shadow.d, shadow.maxt, shadow_active & ~occluded)
+        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk, occluded
 
     def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
                           ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
@@ -315,6 +342,26 @@ class ExactSceneGeometry:
         for group in self.groups:
             occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
+
+
+def _walk_and_test_lathe(lathe: LatheShape, line: mi.Ray3f, active: mi.Bool, after_s: mi.Float,
+                         after_key: mi.UInt32, after_t: mi.Float, shadow: mi.Ray3f, shadow_active: mi.Bool
+                         ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32, mi.Bool]:
+    """``lathe.next_crossing_exact(line, active, after_s, after_key,
+    after_t)`` and ``lathe.ray_test_exact(shadow, shadow_active)``: ``(si,
+    s, key, occluded)``. A polyline lathe answers both with one traced
+    traversal (:func:`~lathe_shape.kernels.polyline.walk_and_test_polyline`),
+    through the lathe's own transform and interaction, as its two queries
+    would; other kinds with their two queries."""
+    if not isinstance(lathe.surface, PolylineSurface):
+        si, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, after_t)
+        return si, s, key, lathe.ray_test_exact(shadow, shadow_active)
+    to_local = lathe._to_local  # (as LatheShape.next_crossing_exact and ray_test_exact)
+    o, d = to_local @ line.o, to_local @ line.d
+    hit, s, key, occluded = walk_and_test_polyline(
+        lathe.surface.data, o, d, mi.Float(line.maxt), active, after_s, after_key, after_t,
+        to_local @ shadow.o, to_local @ shadow.d, mi.Float(shadow.maxt), mi.Bool(shadow_active))
+    return lathe._interaction(line, o, d, hit), s, key, occluded
 
 
 def _exact(shape: mi.Shape) -> bool:
