@@ -140,25 +140,28 @@ def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
     split. ``depth``: at most that many levels below this node (``None``:
     any); where the heuristic's split would need more, the split halves
     the boxes instead."""
-    bounds = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
+    # (whole-array numpy calls: the tree is built in the first render of a
+    # lathe, whose time a user waits for)
+    sub = box[idx]
+    low, high = sub.min(axis=0), sub.max(axis=0)
+    bounds = (low[0], high[1], low[2], high[3])
     if len(idx) == 1:
         return ("leaf", int(idx[0]), bounds)
     best = None
     count = np.arange(1, len(idx))
     for axis in (0, 1):
-        centre = box[idx, 2 * axis] + box[idx, 2 * axis + 1]
-        order = idx[np.argsort(centre, kind="stable")]
-        b = box[order]
-        # Bounds of the first k boxes (prefix) and of the last n - k (suffix)
-        pre = [np.minimum.accumulate(b[:, 0]), np.maximum.accumulate(b[:, 1]),
-               np.minimum.accumulate(b[:, 2]), np.maximum.accumulate(b[:, 3])]
-        suf = [np.minimum.accumulate(b[::-1, 0])[::-1], np.maximum.accumulate(b[::-1, 1])[::-1],
-               np.minimum.accumulate(b[::-1, 2])[::-1], np.maximum.accumulate(b[::-1, 3])[::-1]]
-        cost = (_revolved_area(*(v[:-1] for v in pre)) * count
-                + _revolved_area(*(v[1:] for v in suf)) * count[::-1])
-        k = int(np.argmin(cost))
+        perm = np.argsort(sub[:, 2 * axis] + sub[:, 2 * axis + 1], kind="stable")
+        b = sub[perm]
+        # Bounds of the first k boxes (prefix) and of the last n - k
+        # (suffix): columns (rmin, zmin) and (rmax, zmax)
+        pre_lo, pre_hi = np.minimum.accumulate(b[:, 0::2]), np.maximum.accumulate(b[:, 1::2])
+        suf_lo = np.minimum.accumulate(b[::-1, 0::2])[::-1]
+        suf_hi = np.maximum.accumulate(b[::-1, 1::2])[::-1]
+        cost = (_revolved_area(pre_lo[:-1, 0], pre_hi[:-1, 0], pre_lo[:-1, 1], pre_hi[:-1, 1]) * count
+                + _revolved_area(suf_lo[1:, 0], suf_hi[1:, 0], suf_lo[1:, 1], suf_hi[1:, 1]) * count[::-1])
+        k = int(cost.argmin())
         if best is None or cost[k] < best[0]:
-            best = (cost[k], axis, order, k + 1)
+            best = (cost[k], axis, idx[perm], k + 1)
     _, axis, order, half = best
     if depth is not None:
         if max(half, len(idx) - half) > 1 << (depth - 1):
@@ -179,20 +182,29 @@ def _store_copies(tree: tuple, inner_record: Callable, leaf_record: Callable,
     :func:`threaded_bvh`): ``inner_record(node, first, second)`` with the
     children in the copy's order, ``leaf_record(index, bounds)``; an inner
     node's link is the global index of its second child
-    (``link_to_second``) or of the node after its subtree."""
+    (``link_to_second``) or of the node after its subtree. Each record is
+    made once per node and child order, and shared by the copies."""
     records: list = []
     links: list = []
+    made: dict[tuple[int, bool], list] = {}  # (id(node), children swapped) -> record
 
     def store(node, z_up: bool, r_out: bool) -> None:
         if node[0] == "leaf":
-            records.append(leaf_record(node[1], node[2]))
+            key = (id(node), False)
+            if key not in made:
+                made[key] = leaf_record(node[1], node[2])
+            records.append(made[key])
             links.append(LEAF | node[1])
             return
         _, _, axis, first, second = node
-        if (axis == 1 and not z_up) or (axis == 0 and r_out):
+        swap = (axis == 1 and not z_up) or (axis == 0 and r_out)
+        if swap:
             first, second = second, first
+        key = (id(node), swap)
+        if key not in made:
+            made[key] = inner_record(node, first, second)
         me = len(records)
-        records.append(inner_record(node, first, second))
+        records.append(made[key])
         links.append(0)
         store(first, z_up, r_out)
         if link_to_second:
