@@ -275,8 +275,10 @@ class ExactSceneGeometry:
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
+        t_best = si.t         # the nearest hit so far (along ray)
+        hits = []             # (nearer, the lathes' hits) in turn
         for index, lathe in enumerate(self.single):
-            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
             mine = after.lathe == index
             after_s, after_key = dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING)
             if shadow is None:
@@ -288,16 +290,23 @@ class ExactSceneGeometry:
             place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
             # (the margin holds against the rest only: between lathes the
             # nearer crossing wins, else one could be lost for good)
-            si, walk, take = _nearer(si, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
+            hit, t_best, walk, take = _nearer(t_best, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
+            hits.append((take, hit))
             won |= take
         for group in self.groups:
-            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
             si_group, place = group.ray_walk(line, active, after)
-            si, walk, take = _nearer(si, walk, si_group, place, t0, dr.select(won, 0.0, margin))
+            hit, t_best, walk, take = _nearer(t_best, walk, si_group, place, t0, dr.select(won, 0.0, margin))
+            hits.append((take, hit))
             won |= take
             if shadow is not None:
                 occluded |= group.set.occluded(shadow.o, shadow.d, shadow.maxt, shadow_active & ~occluded)
-        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk, occluded
+        # The interactions are chosen once, the later nearer hit winning
+        # (one selection of the whole interaction per lathe or set)
+        si = self._rest_interaction(ray, pi, active & ~won)
+        for take, hit in hits:
+            si = dr.select(take, hit, si)
+        return si, walk, occluded
 
     def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
                           ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
@@ -373,23 +382,24 @@ def _exact(shape: mi.Shape) -> bool:
     return isinstance(shape, LatheShape) and shape.emitter() is None
 
 
-def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
-            place: CrossingPlace, t0: mi.Float,
-            margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
-    """The nearer of ``si`` (``t`` along the ray) and a lathe's hit
-    ``si_lathe`` (``t`` along the walked line, which the ray meets at
-    ``t0``; nearer only by more than ``margin``), the walk that goes on
-    from it, and whether the lathe's hit is the nearer."""
+def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f, place: CrossingPlace,
+            t0: mi.Float, margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, mi.Float, LineWalk, mi.Bool]:
+    """Whether a lathe's hit ``si_lathe`` (``t`` along the walked line,
+    which the ray meets at ``t0``) is nearer than the nearest hit so far,
+    ``t_best`` along the ray, by more than ``margin``: ``(hit, t_best,
+    walk, take)``, the lathe's hit with its ``t`` along the ray, the new
+    nearest ``t``, the walk that goes on from the nearer, and whether the
+    lathe's hit is the nearer."""
     t_ray = dr.maximum(si_lathe.t - t0, 0.0)
-    take = si_lathe.is_valid() & (t_ray < si.t - margin)
+    take = si_lathe.is_valid() & (t_ray < t_best - margin)
     walk = LineWalk(walk.o, walk.d, dr.select(take, place.lathe, walk.lathe),
                     dr.select(take, place.s, walk.s), dr.select(take, place.key, walk.key),
                     dr.select(take, place.t, walk.t))
-    # A new interaction: Mitsuba's field accessors return references, so
-    # si_lathe.t must not be assigned (place.t may be that very array).
-    nearer = dr.select(take, si_lathe, si)
-    nearer.t = dr.select(take, t_ray, si.t)
-    return nearer, walk, take
+    # A copy: Mitsuba's field accessors return references, so si_lathe.t
+    # must not be assigned (place.t may be that very array).
+    hit = mi.SurfaceInteraction3f(si_lathe)
+    hit.t = t_ray
+    return hit, dr.select(take, t_ray, t_best), walk, take
 
 
 #: Most non-lathe shapes whose surface interactions are computed by direct
