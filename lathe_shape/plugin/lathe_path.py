@@ -201,10 +201,12 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
         # The emitter sample of the last vertex waits for the next query,
         # which tests its shadow ray in the same traced lathe traversal
-        # (ExactSceneGeometry.walk_and_test: compiled once, not twice)
-        shadow = dr.zeros(mi.Ray3f)          # Its shadow ray
-        em_pending = mi.Bool(False)          # Lanes with one to test
-        em_value = mi.Spectrum(0.0)          # Its contribution if unoccluded
+        # (ExactSceneGeometry.walk_and_test: compiled once, not twice).
+        # (Arrays of the rays' width: the lathe kernels' per-lane stacks
+        # misbehave on a ray made of scalars.)
+        shadow = dr.zeros(mi.Ray3f, dr.width(ray.d))     # Its shadow ray
+        em_pending = dr.zeros(mi.Bool, dr.width(ray.d))  # Lanes with one to test
+        em_value = mi.Spectrum(0.0)                      # Its contribution if unoccluded
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
