@@ -33,6 +33,13 @@ line too, from the crossing taken; a lathe crossing must come before their
 hit by more than the spawn offset (where a lathe touches a shape, the
 shape wins).
 
+An integrator may hand the shadow ray of its last vertex to that query
+(:meth:`ExactSceneGeometry.walk_and_test`, as ``lathe_path`` does): a
+single polyline lathe then answers both rays in one traced traversal, so
+that the kernel's longest code is compiled once per render kernel, not
+twice (the first render from an empty kernel cache is mostly LLVM's
+compilation).
+
 The second scene is built once per set of shapes. A lathe that moves
 (:meth:`LatheShape.set_to_world`) is followed before the next query: its
 kind's transforms and top-level BVH are rebuilt as opaque arrays (no
@@ -276,7 +283,7 @@ class ExactSceneGeometry:
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
         t_best = si.t         # the nearest hit so far (along ray)
-        hits = []             # (nearer, the lathes' hits) in turn
+        hits = []             # (nearer, hit) of each lathe and set, in turn
         for index, lathe in enumerate(self.single):
             line.maxt = t0 + dr.minimum(ray.maxt, t_best)
             mine = after.lathe == index
