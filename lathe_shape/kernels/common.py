@@ -140,13 +140,14 @@ def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
     split. ``depth``: at most that many levels below this node (``None``:
     any); where the heuristic's split would need more, the split halves
     the boxes instead."""
-    # (whole-array numpy calls: the tree is built in the first render of a
-    # lathe, whose time a user waits for)
+    # (whole-array numpy calls, and plain Python for small nodes, where
+    # numpy's overhead per call dominates: the tree is built in the first
+    # render of a lathe, whose time a user waits for)
+    if len(idx) <= _SMALL_NODE:
+        return _sah_split_small(box, [int(k) for k in idx], depth)
     sub = box[idx]
     low, high = sub.min(axis=0), sub.max(axis=0)
     bounds = (low[0], high[1], low[2], high[3])
-    if len(idx) == 1:
-        return ("leaf", int(idx[0]), bounds)
     best = None
     count = np.arange(1, len(idx))
     for axis in (0, 1):
@@ -169,6 +170,43 @@ def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
         depth -= 1
     return ("node", bounds, axis, _sah_split(box, order[:half], depth),
             _sah_split(box, order[half:], depth))
+
+
+#: Nodes of at most this many boxes are split by :func:`_sah_split_small`.
+_SMALL_NODE = 8
+
+
+def _sah_split_small(box: np.ndarray, idx: list[int], depth: int | None):
+    """:func:`_sah_split` of a few boxes in plain Python: the same float64
+    arithmetic in the same order, so the same tree."""
+    rows = box[idx].tolist()
+    bounds = (min(r[0] for r in rows), max(r[1] for r in rows),
+              min(r[2] for r in rows), max(r[3] for r in rows))
+    n = len(idx)
+    if n == 1:
+        return ("leaf", idx[0], bounds)
+    best = None
+    for axis in (0, 1):
+        perm = sorted(range(n), key=lambda i: rows[i][2 * axis] + rows[i][2 * axis + 1])  # stable
+        b = [rows[i] for i in perm]
+        pre = [b[0]]  # bounds of the first k + 1 boxes, of the last n - k
+        suf = [b[-1]]
+        for r, q in zip(b[1:], b[-2::-1], strict=True):
+            p, s = pre[-1], suf[-1]
+            pre.append((min(p[0], r[0]), max(p[1], r[1]), min(p[2], r[2]), max(p[3], r[3])))
+            suf.append((min(s[0], q[0]), max(s[1], q[1]), min(s[2], q[2]), max(s[3], q[3])))
+        suf.reverse()
+        for k in range(n - 1):
+            cost = _revolved_area(*pre[k]) * (k + 1) + _revolved_area(*suf[k + 1]) * (n - 1 - k)
+            if best is None or cost < best[0]:
+                best = (cost, axis, [idx[i] for i in perm], k + 1)
+    _, axis, order, half = best
+    if depth is not None:
+        if max(half, n - half) > 1 << (depth - 1):
+            half = n // 2
+        depth -= 1
+    return ("node", bounds, axis, _sah_split_small(box, order[:half], depth),
+            _sah_split_small(box, order[half:], depth))
 
 
 def _bounds(node: tuple) -> tuple:
