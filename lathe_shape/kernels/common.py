@@ -140,25 +140,29 @@ def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
     split. ``depth``: at most that many levels below this node (``None``:
     any); where the heuristic's split would need more, the split halves
     the boxes instead."""
-    bounds = (box[idx, 0].min(), box[idx, 1].max(), box[idx, 2].min(), box[idx, 3].max())
-    if len(idx) == 1:
-        return ("leaf", int(idx[0]), bounds)
+    # (whole-array numpy calls, and plain Python for small nodes, where
+    # numpy's overhead per call dominates: the tree is built in the first
+    # render of a lathe, whose time a user waits for)
+    if len(idx) <= _SMALL_NODE:
+        return _sah_split_small(box, [int(k) for k in idx], depth)
+    sub = box[idx]
+    low, high = sub.min(axis=0), sub.max(axis=0)
+    bounds = (low[0], high[1], low[2], high[3])
     best = None
     count = np.arange(1, len(idx))
     for axis in (0, 1):
-        centre = box[idx, 2 * axis] + box[idx, 2 * axis + 1]
-        order = idx[np.argsort(centre, kind="stable")]
-        b = box[order]
-        # Bounds of the first k boxes (prefix) and of the last n - k (suffix)
-        pre = [np.minimum.accumulate(b[:, 0]), np.maximum.accumulate(b[:, 1]),
-               np.minimum.accumulate(b[:, 2]), np.maximum.accumulate(b[:, 3])]
-        suf = [np.minimum.accumulate(b[::-1, 0])[::-1], np.maximum.accumulate(b[::-1, 1])[::-1],
-               np.minimum.accumulate(b[::-1, 2])[::-1], np.maximum.accumulate(b[::-1, 3])[::-1]]
-        cost = (_revolved_area(*(v[:-1] for v in pre)) * count
-                + _revolved_area(*(v[1:] for v in suf)) * count[::-1])
-        k = int(np.argmin(cost))
+        perm = np.argsort(sub[:, 2 * axis] + sub[:, 2 * axis + 1], kind="stable")
+        b = sub[perm]
+        # Bounds of the first k boxes (prefix) and of the last n - k
+        # (suffix): columns (rmin, zmin) and (rmax, zmax)
+        pre_lo, pre_hi = np.minimum.accumulate(b[:, 0::2]), np.maximum.accumulate(b[:, 1::2])
+        suf_lo = np.minimum.accumulate(b[::-1, 0::2])[::-1]
+        suf_hi = np.maximum.accumulate(b[::-1, 1::2])[::-1]
+        cost = (_revolved_area(pre_lo[:-1, 0], pre_hi[:-1, 0], pre_lo[:-1, 1], pre_hi[:-1, 1]) * count
+                + _revolved_area(suf_lo[1:, 0], suf_hi[1:, 0], suf_lo[1:, 1], suf_hi[1:, 1]) * count[::-1])
+        k = int(cost.argmin())
         if best is None or cost[k] < best[0]:
-            best = (cost[k], axis, order, k + 1)
+            best = (cost[k], axis, idx[perm], k + 1)
     _, axis, order, half = best
     if depth is not None:
         if max(half, len(idx) - half) > 1 << (depth - 1):
@@ -166,6 +170,43 @@ def _sah_split(box: np.ndarray, idx: np.ndarray, depth: int | None = None):
         depth -= 1
     return ("node", bounds, axis, _sah_split(box, order[:half], depth),
             _sah_split(box, order[half:], depth))
+
+
+#: Nodes of at most this many boxes are split by :func:`_sah_split_small`.
+_SMALL_NODE = 8
+
+
+def _sah_split_small(box: np.ndarray, idx: list[int], depth: int | None):
+    """:func:`_sah_split` of a few boxes in plain Python: the same float64
+    arithmetic in the same order, so the same tree."""
+    rows = box[idx].tolist()
+    bounds = (min(r[0] for r in rows), max(r[1] for r in rows),
+              min(r[2] for r in rows), max(r[3] for r in rows))
+    n = len(idx)
+    if n == 1:
+        return ("leaf", idx[0], bounds)
+    best = None
+    for axis in (0, 1):
+        perm = sorted(range(n), key=lambda i: rows[i][2 * axis] + rows[i][2 * axis + 1])  # stable
+        b = [rows[i] for i in perm]
+        pre = [b[0]]  # bounds of the first k + 1 boxes, of the last n - k
+        suf = [b[-1]]
+        for r, q in zip(b[1:], b[-2::-1], strict=True):
+            p, s = pre[-1], suf[-1]
+            pre.append((min(p[0], r[0]), max(p[1], r[1]), min(p[2], r[2]), max(p[3], r[3])))
+            suf.append((min(s[0], q[0]), max(s[1], q[1]), min(s[2], q[2]), max(s[3], q[3])))
+        suf.reverse()
+        for k in range(n - 1):
+            cost = _revolved_area(*pre[k]) * (k + 1) + _revolved_area(*suf[k + 1]) * (n - 1 - k)
+            if best is None or cost < best[0]:
+                best = (cost, axis, [idx[i] for i in perm], k + 1)
+    _, axis, order, half = best
+    if depth is not None:
+        if max(half, n - half) > 1 << (depth - 1):
+            half = n // 2
+        depth -= 1
+    return ("node", bounds, axis, _sah_split_small(box, order[:half], depth),
+            _sah_split_small(box, order[half:], depth))
 
 
 def _bounds(node: tuple) -> tuple:
@@ -179,20 +220,29 @@ def _store_copies(tree: tuple, inner_record: Callable, leaf_record: Callable,
     :func:`threaded_bvh`): ``inner_record(node, first, second)`` with the
     children in the copy's order, ``leaf_record(index, bounds)``; an inner
     node's link is the global index of its second child
-    (``link_to_second``) or of the node after its subtree."""
+    (``link_to_second``) or of the node after its subtree. Each record is
+    made once per node and child order, and shared by the copies."""
     records: list = []
     links: list = []
+    made: dict[tuple[int, bool], list] = {}  # (id(node), children swapped) -> record
 
     def store(node, z_up: bool, r_out: bool) -> None:
         if node[0] == "leaf":
-            records.append(leaf_record(node[1], node[2]))
+            key = (id(node), False)
+            if key not in made:
+                made[key] = leaf_record(node[1], node[2])
+            records.append(made[key])
             links.append(LEAF | node[1])
             return
         _, _, axis, first, second = node
-        if (axis == 1 and not z_up) or (axis == 0 and r_out):
+        swap = (axis == 1 and not z_up) or (axis == 0 and r_out)
+        if swap:
             first, second = second, first
+        key = (id(node), swap)
+        if key not in made:
+            made[key] = inner_record(node, first, second)
         me = len(records)
-        records.append(inner_record(node, first, second))
+        records.append(made[key])
         links.append(0)
         store(first, z_up, r_out)
         if link_to_second:

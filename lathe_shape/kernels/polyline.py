@@ -97,6 +97,7 @@ __all__ = [
     "count_crossings_polyline",
     "next_crossing_polyline",
     "polyline_geometry",
+    "walk_and_test_polyline",
 ]
 
 #: Joint tolerance relative to the profile size (max of r extent, z extent:
@@ -655,6 +656,27 @@ def intersect_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     return _first_crossing(data, _Ray(data, o, d, tmax, active), False)[0]
 
 
+def _walk_ray(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+              after_s: mi.Float | None, after_key: mi.UInt32 | None, after_t: mi.Float | None) -> _Ray:
+    """The ray of :func:`next_crossing_polyline` (its arguments), set to
+    visit the crossings after ``(after_s, after_key)`` or ``after_t``."""
+    ray = _Ray(data, o, d, tmax, active)
+    s_from = ray.s_lo
+    if after_t is not None:
+        # t = (s_enter + s) t_scale (kernels/common.py, LatheRay)
+        s_from = dr.maximum(s_from, after_t * dr.rcp(ray.t_scale) - ray.s_enter)
+    if after_s is not None:
+        keyed = after_key != NO_CROSSING
+        after_s = dr.select(keyed, after_s, s_from)
+        later = after_s > ray.s_lo
+        ray.after = _Key(dr.select(later, after_s, ray.s_lo),
+                         dr.select(later & keyed, after_key, NO_CROSSING))
+    else:
+        ray.after = _Key(s_from, mi.UInt32(NO_CROSSING))
+    ray.s_lo = ray.after.s  # boxes before it need no visit
+    return ray
+
+
 def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
                            active: mi.Bool, after_s: mi.Float | None = None,
                            after_key: mi.UInt32 | None = None, after_t: mi.Float | None = None
@@ -673,21 +695,62 @@ def next_crossing_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tm
     (a corner): with the joint rule of :func:`_segment_roots` a ray from
     outside the lathe then crosses it an even number of times.
     """
-    ray = _Ray(data, o, d, tmax, active)
-    s_from = ray.s_lo
-    if after_t is not None:
-        # t = (s_enter + s) t_scale (kernels/common.py, LatheRay)
-        s_from = dr.maximum(s_from, after_t * dr.rcp(ray.t_scale) - ray.s_enter)
-    if after_s is not None:
-        keyed = after_key != NO_CROSSING
-        after_s = dr.select(keyed, after_s, s_from)
-        later = after_s > ray.s_lo
-        ray.after = _Key(dr.select(later, after_s, ray.s_lo),
-                         dr.select(later & keyed, after_key, NO_CROSSING))
-    else:
-        ray.after = _Key(s_from, mi.UInt32(NO_CROSSING))
-    ray.s_lo = ray.after.s  # boxes before it need no visit
+    ray = _walk_ray(data, o, d, tmax, active, after_s, after_key, after_t)
     return _first_crossing(data, ray, True)
+
+
+#: Turns of :func:`walk_and_test_polyline`'s loop, per variant (opaque, made
+#: on first use: a literal trip count would let LLVM unroll the loop,
+#: copying the traversal that it is there to compile once).
+_JOBS: dict[str, mi.UInt32] = {}
+
+
+@dr.syntax
+def walk_and_test_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
+                           active: mi.Bool, after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float,
+                           shadow_o: mi.Point3f, shadow_d: mi.Vector3f, shadow_tmax: mi.Float,
+                           shadow_active: mi.Bool) -> tuple[PolylineHit, mi.Float, mi.UInt32, mi.Bool]:
+    """:func:`next_crossing_polyline` of the ray ``o + t d`` (``after_s``,
+    ``after_key``, ``after_t`` as there) and :func:`occluded_polyline` of
+    the shadow ray ``shadow_o + t shadow_d`` (``0 < t < shadow_tmax``):
+    ``(hit, s, key, occluded)`` (``s``, ``key`` as there where ``active``;
+    elsewhere ``hit`` is a miss).
+
+    The two queries are two turns of a symbolic loop around one traversal:
+    its code, most of the kernel, is traced and compiled once instead of
+    twice (a render's first, uncached compilation is dominated by LLVM's
+    time on such code). The shadow ray's turn asks for its first crossing
+    from ``t = 0``, which is valid exactly where some crossing lies in
+    ``0 < t < shadow_tmax`` (``t`` grows with ``s``), i.e. where
+    :func:`occluded_polyline` finds one. (Stopping that turn at the first
+    crossing found, as :func:`occluded_polyline` does, made the renders
+    slower.)"""
+    jobs = _JOBS.get(mi.variant())
+    if jobs is None:
+        jobs = _JOBS[mi.variant()] = opaque(2, mi.UInt32)
+    width = dr.width(o, after_s, shadow_o)
+    # Turns: 0 the shadow ray, 1 the ray; each lane takes only those it
+    # needs (a packet without a shadow ray skips turn 0's set-up: camera
+    # rays, and the renders stay as fast as with two queries)
+    job = dr.select(shadow_active, dr.zeros(mi.UInt32, width), 1)  # this lane's turn
+    hit = PolylineHit(t=dr.full(mi.Float, dr.inf, width), seg=dr.zeros(mi.UInt32, width),
+                      u=dr.zeros(mi.Float, width), valid=dr.zeros(mi.Bool, width))  # the ray's crossing
+    s = dr.zeros(mi.Float, width)        # ... its place (s, key)
+    key = dr.zeros(mi.UInt32, width)
+    occluded = dr.zeros(mi.Bool, width)  # whether the shadow ray meets the lathe
+    while (job < jobs) & ((job == 0) | active):
+        test = job == 0
+        ray = _walk_ray(data, dr.select(test, shadow_o, o), dr.select(test, shadow_d, d),
+                        dr.select(test, shadow_tmax, tmax), dr.select(test, shadow_active, active),
+                        dr.select(test, 0.0, after_s), dr.select(test, NO_CROSSING, after_key),
+                        dr.select(test, 0.0, after_t))
+        hit_job, s_job, key_job = _first_crossing(data, ray, True)
+        occluded |= test & hit_job.valid
+        hit = dr.select(test, hit, hit_job)
+        s = dr.select(test, s, s_job)
+        key = dr.select(test, key, key_job)
+        job += 1
+    return hit, s, key, occluded
 
 
 @dr.syntax

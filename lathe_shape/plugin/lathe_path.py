@@ -199,13 +199,23 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         albedo = mi.Spectrum(0.0)            # Albedo guide (AOV)
         normal = mi.Vector3f(0.0)            # Normal guide (AOV)
         guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
+        # The emitter sample of the last vertex waits for the next query,
+        # which tests its shadow ray in the same traced lathe traversal
+        # (ExactSceneGeometry.walk_and_test: compiled once, not twice).
+        # (Arrays of the rays' width: the lathe kernels' per-lane stacks
+        # misbehave on a ray made of scalars.)
+        shadow = dr.zeros(mi.Ray3f, dr.width(ray.d))     # Its shadow ray
+        em_pending = dr.zeros(mi.Bool, dr.width(ray.d))  # Lanes with one to test
+        em_value = mi.Spectrum(0.0)                      # Its contribution if unoccluded
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
 
-        while dr.hint(active, max_iterations=-1, label="lathe_path"):
+        # (a lane whose path ended runs once more to test a pending shadow ray)
+        while dr.hint(active | em_pending, max_iterations=-1, label="lathe_path"):
             # (coherent camera rays: Embree traces them faster, as in Mitsuba's path)
-            si, walk = geometry.ray_intersect_walk(ray, active, walk, depth == 0)
+            si, walk, occluded = geometry.walk_and_test(ray, active, walk, depth == 0, shadow, em_pending)
+            L += dr.select(em_pending & ~occluded, em_value, 0.0)
             valid = si.is_valid()
 
             # ---------------- Direct emission (BSDF-sampled) ----------------
@@ -213,7 +223,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
             emitted = ds.emitter.eval(si, active)
-            L += beta * mis_bsdf * emitted
+            L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
             active_next = active & valid & (depth + 1 < self.max_depth)
 
@@ -251,8 +261,8 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 side_geo = dr.dot(si.n, ds.d) * cos_in_geo
                 side_sh = mi.Frame3f.cos_theta(si.to_local(ds.d)) * mi.Frame3f.cos_theta(si.wi)
                 active_em &= side_geo * side_sh > 0.0
-            occluded = geometry.ray_test(si.spawn_ray_to(ds.p), active_em)
-            active_em &= ~occluded
+            shadow = si.spawn_ray_to(ds.p)
+            em_pending = active_em
 
             # --- One BSDF call: the light direction's value and pdf, and
             # the sampled direction (as Mitsuba's path: one dispatch) ---
@@ -263,7 +273,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
                 bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf_em))
-            L += dr.select(active_em, beta * mis_em * bsdf_val_em * em_weight, 0.0)
+            em_value = beta * mis_em * bsdf_val_em * em_weight
 
             # ----------------------- BSDF sampling -----------------------
             wo_world = si.to_world(bs.wo)

@@ -33,6 +33,13 @@ line too, from the crossing taken; a lathe crossing must come before their
 hit by more than the spawn offset (where a lathe touches a shape, the
 shape wins).
 
+An integrator may hand the shadow ray of its last vertex to that query
+(:meth:`ExactSceneGeometry.walk_and_test`, as ``lathe_path`` does): a
+single polyline lathe then answers both rays in one traced traversal, so
+that the kernel's longest code is compiled once per render kernel, not
+twice (the first render from an empty kernel cache is mostly LLVM's
+compilation).
+
 The second scene is built once per set of shapes. A lathe that moves
 (:meth:`LatheShape.set_to_world`) is followed before the next query: its
 kind's transforms and top-level BVH are rebuilt as opaque arrays (no
@@ -57,7 +64,9 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.common import NO_CROSSING, opaque
+from ..kernels.polyline import walk_and_test_polyline
 from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
+from ..surfaces import PolylineSurface
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
 from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
@@ -225,13 +234,31 @@ class ExactSceneGeometry:
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
                            coherent: mi.Bool | bool = False) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
         """Nearest surface interaction along ``ray``, a ray that may go on
+        along the line of ``walk`` past its last lathe crossing: see
+        :meth:`walk_and_test`, which this is without a shadow ray."""
+        si, walk, _ = self.walk_and_test(ray, active, walk, coherent)
+        return si, walk
+
+    def walk_and_test(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
+                      coherent: mi.Bool | bool = False, shadow: mi.Ray3f | None = None,
+                      shadow_active: mi.Bool | None = None
+                      ) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
+        """Nearest surface interaction along ``ray``, a ray that may go on
         along the line of ``walk`` past its last lathe crossing (see
         :mod:`~lathe_shape.plugin.line_walk`): where it does, the lathes
         are queried on that line for the crossing after the one taken (no
         offset, none skipped or found twice); elsewhere as
-        :meth:`ray_intersect` (``coherent`` too). Returns the interaction
-        (``t`` along ``ray``) and the walk to pass with the next ray."""
+        :meth:`ray_intersect` (``coherent`` too). With ``shadow``, also
+        :meth:`ray_test` of that ray (lanes ``shadow_active``): a single
+        polyline lathe then answers both rays with one traced traversal
+        (:func:`_walk_and_test_lathe`), compiled once instead of twice,
+        which shortens a render's first, uncached compilation. Returns the
+        interaction (``t`` along ``ray``), the walk to pass with the next
+        ray and whether ``shadow`` is occluded (False without it)."""
         self.follow_moves()
+        occluded = mi.Bool(False)  # the shadow ray is blocked
+        if shadow is not None:
+            occluded = self.rest.ray_test(shadow, shadow_active)
         same = mi.Bool(active) & continues_line(ray, walk)
         line = mi.Ray3f(ray)
         line.o = dr.select(same, walk.o, ray.o)
@@ -255,22 +282,38 @@ class ExactSceneGeometry:
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
+        t_best = si.t         # the nearest hit so far (along ray)
+        hits = []             # (nearer, hit) of each lathe and set, in turn
         for index, lathe in enumerate(self.single):
-            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
             mine = after.lathe == index
-            si_lathe, s, key = lathe.next_crossing_exact(
-                line, active, dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING), t0)
+            after_s, after_key = dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING)
+            if shadow is None:
+                si_lathe, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, t0)
+            else:
+                si_lathe, s, key, blocked = _walk_and_test_lathe(
+                    lathe, line, active, after_s, after_key, t0, shadow, shadow_active & ~occluded)
+                occluded |= blocked
             place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
             # (the margin holds against the rest only: between lathes the
             # nearer crossing wins, else one could be lost for good)
-            si, walk, take = _nearer(si, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
+            hit, t_best, walk, take = _nearer(t_best, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
+            hits.append((take, hit))
             won |= take
         for group in self.groups:
-            line.maxt = t0 + dr.minimum(ray.maxt, si.t)
+            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
             si_group, place = group.ray_walk(line, active, after)
-            si, walk, take = _nearer(si, walk, si_group, place, t0, dr.select(won, 0.0, margin))
+            hit, t_best, walk, take = _nearer(t_best, walk, si_group, place, t0, dr.select(won, 0.0, margin))
+            hits.append((take, hit))
             won |= take
-        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), walk
+            if shadow is not None:
+                occluded |= group.set.occluded(shadow.o, shadow.d, shadow.maxt, shadow_active & ~occluded)
+        # The interactions are chosen once, the later nearer hit winning
+        # (one selection of the whole interaction per lathe or set)
+        si = self._rest_interaction(ray, pi, active & ~won)
+        for take, hit in hits:
+            si = dr.select(take, hit, si)
+        return si, walk, occluded
 
     def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
                           ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
@@ -317,6 +360,26 @@ class ExactSceneGeometry:
         return occluded
 
 
+def _walk_and_test_lathe(lathe: LatheShape, line: mi.Ray3f, active: mi.Bool, after_s: mi.Float,
+                         after_key: mi.UInt32, after_t: mi.Float, shadow: mi.Ray3f, shadow_active: mi.Bool
+                         ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32, mi.Bool]:
+    """``lathe.next_crossing_exact(line, active, after_s, after_key,
+    after_t)`` and ``lathe.ray_test_exact(shadow, shadow_active)``: ``(si,
+    s, key, occluded)``. A polyline lathe answers both with one traced
+    traversal (:func:`~lathe_shape.kernels.polyline.walk_and_test_polyline`),
+    through the lathe's own transform and interaction, as its two queries
+    would; other kinds with their two queries."""
+    if not isinstance(lathe.surface, PolylineSurface):
+        si, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, after_t)
+        return si, s, key, lathe.ray_test_exact(shadow, shadow_active)
+    to_local = lathe._to_local  # (as LatheShape.next_crossing_exact and ray_test_exact)
+    o, d = to_local @ line.o, to_local @ line.d
+    hit, s, key, occluded = walk_and_test_polyline(
+        lathe.surface.data, o, d, mi.Float(line.maxt), active, after_s, after_key, after_t,
+        to_local @ shadow.o, to_local @ shadow.d, mi.Float(shadow.maxt), mi.Bool(shadow_active))
+    return lathe._interaction(line, o, d, hit), s, key, occluded
+
+
 def _exact(shape: mi.Shape) -> bool:
     """Whether ``shape`` is a lathe intersected exactly: every lathe but an
     emitting one. Mitsuba samples an area emitter's points on its mesh, which
@@ -326,23 +389,24 @@ def _exact(shape: mi.Shape) -> bool:
     return isinstance(shape, LatheShape) and shape.emitter() is None
 
 
-def _nearer(si: mi.SurfaceInteraction3f, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
-            place: CrossingPlace, t0: mi.Float,
-            margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
-    """The nearer of ``si`` (``t`` along the ray) and a lathe's hit
-    ``si_lathe`` (``t`` along the walked line, which the ray meets at
-    ``t0``; nearer only by more than ``margin``), the walk that goes on
-    from it, and whether the lathe's hit is the nearer."""
+def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f, place: CrossingPlace,
+            t0: mi.Float, margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, mi.Float, LineWalk, mi.Bool]:
+    """Whether a lathe's hit ``si_lathe`` (``t`` along the walked line,
+    which the ray meets at ``t0``) is nearer than the nearest hit so far,
+    ``t_best`` along the ray, by more than ``margin``: ``(hit, t_best,
+    walk, take)``, the lathe's hit with its ``t`` along the ray, the new
+    nearest ``t``, the walk that goes on from the nearer, and whether the
+    lathe's hit is the nearer."""
     t_ray = dr.maximum(si_lathe.t - t0, 0.0)
-    take = si_lathe.is_valid() & (t_ray < si.t - margin)
+    take = si_lathe.is_valid() & (t_ray < t_best - margin)
     walk = LineWalk(walk.o, walk.d, dr.select(take, place.lathe, walk.lathe),
                     dr.select(take, place.s, walk.s), dr.select(take, place.key, walk.key),
                     dr.select(take, place.t, walk.t))
-    # A new interaction: Mitsuba's field accessors return references, so
-    # si_lathe.t must not be assigned (place.t may be that very array).
-    nearer = dr.select(take, si_lathe, si)
-    nearer.t = dr.select(take, t_ray, si.t)
-    return nearer, walk, take
+    # A copy: Mitsuba's field accessors return references, so si_lathe.t
+    # must not be assigned (place.t may be that very array).
+    hit = mi.SurfaceInteraction3f(si_lathe)
+    hit.t = t_ray
+    return hit, dr.select(take, t_ray, t_best), walk, take
 
 
 #: Most non-lathe shapes whose surface interactions are computed by direct

@@ -1,8 +1,8 @@
 """Helpers of the benchmark scripts: their shared options, render timing
-(interleaved repeats summarised by median and spread), the
-first render from a cold kernel cache, the coarsest reference mesh that
-agrees with the exact render, and scene files loaded with the options
-applied (and, optionally, the lathe's profile replaced inline)."""
+(interleaved repeats summarised by median and spread), the first render
+from a cold kernel cache (and where its time goes), the coarsest reference
+mesh that agrees with the exact render, and scene files loaded with the
+options applied (and, optionally, the lathe's profile replaced inline)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ __all__ = [
     "bench_arguments",
     "bench_scene",
     "cold_first_render",
+    "cold_first_render_parts",
     "coarsest_agreeing_mesh",
     "interleaved_render_times",
     "load_with_profile",
@@ -153,15 +154,22 @@ def coarsest_agreeing_mesh(scene_at: Callable[[int], mi.Scene], exact_scene: mi.
 
 
 _COLD_RENDER = """
-import sys, time
+import json, sys, time
+import drjit as dr
 import mitsuba as mi
 from lathe_shape.cli.common import select_variant
 from lathe_shape.tools.scenes import load_scene
 select_variant(sys.argv[1])
 scene = load_scene(sys.argv[2], dict(arg.split("=", 1) for arg in sys.argv[3:]))
+dr.set_flag(dr.JitFlag.KernelHistory, True)
+dr.kernel_history()
 start = time.perf_counter()
 mi.render(scene).numpy()
-print(time.perf_counter() - start)
+seconds = time.perf_counter() - start
+kernels = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+print(json.dumps({"seconds": seconds, "operations": [k["operation_count"] for k in kernels],
+                  **{key: sum(k[key + "_time"] for k in kernels) / 1000
+                     for key in ("codegen", "backend", "execution")}}))
 """
 
 
@@ -172,6 +180,18 @@ def cold_first_render(scene_file: str | Path, integrator: str, variant: str,
     example scenes declare it) in a fresh process with an empty Dr.Jit
     kernel cache (a new home folder), as a user meets it on a new machine:
     JIT compilation included, scene loading excluded."""
+    return cold_first_render_parts(scene_file, integrator, variant, defines)["seconds"]
+
+
+def cold_first_render_parts(scene_file: str | Path, integrator: str, variant: str,
+                            defines: dict[str, str]) -> dict:
+    """:func:`cold_first_render` with where its time went: ``seconds`` (the
+    render), and over its JIT kernels (Dr.Jit's kernel history) the seconds
+    of ``codegen`` (IR assembly), ``backend`` (compilation, LLVM or the CUDA
+    driver) and ``execution``, and ``operations`` (IR operations per
+    kernel). The rest of ``seconds`` is Python tracing and scene
+    preparation."""
+    import json
     import os
     import subprocess
     import sys
@@ -184,4 +204,4 @@ def cold_first_render(scene_file: str | Path, integrator: str, variant: str,
         result = subprocess.run(command, capture_output=True, text=True, env={**os.environ, "HOME": home})
     if result.returncode != 0:
         raise RuntimeError(f"cold render of {scene_file} failed: {result.stderr.strip()[-500:]}")
-    return float(result.stdout.strip().splitlines()[-1])
+    return json.loads(result.stdout.strip().splitlines()[-1])
