@@ -99,8 +99,11 @@ def test_turntable_ctrl_c_while_last_frames_are_written(tmp_path, capsys, monkey
     # Every frame rendered, the command waits for the writers: a Ctrl-C then
     # must not leave a hidden temporary file or a PNG without its EXR.
     from lathe_shape.cli.turntable import main
-    from lathe_shape.tools import images
+    from lathe_shape.tools import images, writer
 
+    # One writer, whatever the machine (with four, frame 2 would be written
+    # alongside frames 0 and 1 before the Ctrl-C).
+    monkeypatch.setattr(writer, "default_workers", lambda frame_bytes=0: 1)
     write_png, calls = images.write_png, []
 
     def slow_png(*args, **kwargs) -> None:
@@ -233,7 +236,8 @@ def test_repeated_in_process_turntables_leave_no_thread(tmp_path, capsys, monkey
     deadline = time.monotonic() + 10
     while threading.active_count() > before and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert threading.active_count() == before, [t.name for t in threading.enumerate()]
+    # (at most as many as before: threads of an earlier test may end meanwhile)
+    assert threading.active_count() <= before, [t.name for t in threading.enumerate()]
 
 
 @pytest.mark.parametrize("error", [OSError(28, "No space left on device", "/x/.frame_0000.1.tmp.png"),
