@@ -7,7 +7,9 @@ as ratios measured in one run.
    glass pixels (found first, see `tools.bench.coarsest_agreeing_mesh`).
 2. `lathe_path` on goblet profiles of 31 ... 1000 segments in one scene.
 3. The first render in a fresh process with an empty kernel cache (JIT
-   compilation included), `path` on the mesh against `lathe_path`.
+   compilation included), `path` on the mesh against `lathe_path`:
+   --repeat interleaved processes each, with the median split of the time
+   into IR assembly (codegen), compilation (backend) and execution.
 
 Times are medians of --repeat interleaved renders (A B C A B C ...) after a
 warm-up render of each case, with their min-max spread.
@@ -27,7 +29,7 @@ from lathe_shape.tools.bench import (
     bench_arguments,
     bench_scene,
     coarsest_agreeing_mesh,
-    cold_first_render,
+    cold_first_render_parts,
     interleaved_render_times,
     median_spread,
 )
@@ -123,11 +125,17 @@ def main() -> None:
     print("\n3) first render from an empty kernel cache (fresh process, brandy bottle)")
     defines = {"res": str(width), "spp": str(args.spp), "max_depth": str(args.max_depths[0])}
     scene_file = ROOT / "scenes" / "brandy_bottle.xml"
-    first = {name: [cold_first_render(scene_file, name, args.variant, defines) for _ in range(2)]
-             for name in ("path", "lathe_path")}
-    for name, values in first.items():
-        print(f"{name:<12}{timing(values):>24}")
-    ratio = median_spread(first["lathe_path"])[0] / median_spread(first["path"])[0]
+    parts = {"path": [], "lathe_path": []}
+    for _ in range(args.repeat):  # interleaved, as the warm renders
+        for name, runs in parts.items():
+            runs.append(cold_first_render_parts(scene_file, name, args.variant, defines))
+    for name, runs in parts.items():
+        split = ", ".join(f"{key} {np.median([run[key] for run in runs]) * 1e3:.0f} ms"
+                          for key in ("codegen", "backend", "execution"))
+        ops = int(np.median([sum(run["operations"]) for run in runs]))
+        print(f"{name:<12}{timing([run['seconds'] for run in runs]):>24}   ({split}; {ops} IR operations)")
+    ratio = (median_spread([run["seconds"] for run in parts["lathe_path"]])[0]
+             / median_spread([run["seconds"] for run in parts["path"]])[0])
     print(f"lathe_path / path: {ratio:.2f}x")
 
 
