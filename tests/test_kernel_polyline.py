@@ -64,8 +64,8 @@ def vertex_distance(prof, p):
     return np.min(np.hypot(pr[:, None] - vr, pz[:, None] - vz), axis=1)
 
 
-@CUDA_ROUNDING
-@pytest.mark.parametrize('name', NAMES)
+# (on CUDA one ray at the cone's tip was decided differently, see conftest)
+@pytest.mark.parametrize('name', [pytest.param(n, marks=CUDA_ROUNDING) if n == 'cone' else n for n in NAMES])
 def test_against_reference(name):
     """Hit/miss, t, segment and normal agree with brute-force float64."""
     prof = dict(PROFILES)[name]
