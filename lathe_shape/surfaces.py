@@ -48,6 +48,7 @@ from .kernels.polyline import (
     occluded_polyline,
     polyline_geometry,
     profile_polyline_data,
+    walk_and_test_polyline,
 )
 from .profiles import bspline as bs
 from .profiles.bspline import BSplineProfile, make_bspline_profile
@@ -84,6 +85,13 @@ class Surface(Protocol):
                       ) -> tuple[LatheHit, mi.Float, mi.UInt32]:
         """The crossing after a previous one of local-frame rays walked from
         one origin: ``(hit, s, key)``."""
+
+    def walk_and_test(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float,
+                      shadow_o: mi.Point3f, shadow_d: mi.Vector3f, shadow_tmax: mi.Float,
+                      shadow_active: mi.Bool) -> tuple[LatheHit, mi.Float, mi.UInt32, mi.Bool]:
+        """:meth:`next_crossing` of the walked rays and :meth:`occluded` of
+        the shadow rays ``shadow_o + t shadow_d``: ``(hit, s, key, occluded)``."""
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         """Normals, uv and partials at a hit ``(seg, u)`` at local point ``p``."""
@@ -122,6 +130,15 @@ class _KernelSurface:
         (see ``next_crossing_polyline``): ``(hit, s, key)``."""
         return self._next_crossing(self.data, o, d, tmax, active, after_s, after_key, after_t)
 
+    def walk_and_test(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float,
+                      shadow_o: mi.Point3f, shadow_d: mi.Vector3f, shadow_tmax: mi.Float,
+                      shadow_active: mi.Bool) -> tuple[LatheHit, mi.Float, mi.UInt32, mi.Bool]:
+        """:meth:`next_crossing` and :meth:`occluded` as two queries (kinds
+        with a shared traversal override this)."""
+        hit, s, key = self.next_crossing(o, d, tmax, active, after_s, after_key, after_t)
+        return hit, s, key, self.occluded(shadow_o, shadow_d, shadow_tmax, shadow_active)
+
 
 class PolylineSurface(_KernelSurface):
     """Revolved polyline profile (paper Method 1)."""
@@ -143,6 +160,15 @@ class PolylineSurface(_KernelSurface):
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return polyline_geometry(self.data, p, seg, u, self.smooth)
+
+    def walk_and_test(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
+                      after_s: mi.Float, after_key: mi.UInt32, after_t: mi.Float,
+                      shadow_o: mi.Point3f, shadow_d: mi.Vector3f, shadow_tmax: mi.Float,
+                      shadow_active: mi.Bool) -> tuple[LatheHit, mi.Float, mi.UInt32, mi.Bool]:
+        """Both queries in one traced traversal (``walk_and_test_polyline``):
+        the kernel's traversal is compiled once, not twice."""
+        return walk_and_test_polyline(self.data, o, d, tmax, active, after_s, after_key, after_t,
+                                      shadow_o, shadow_d, shadow_tmax, shadow_active)
 
 
 class BSplineSurface(_KernelSurface):

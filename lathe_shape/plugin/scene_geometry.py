@@ -64,9 +64,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.common import NO_CROSSING, opaque
-from ..kernels.polyline import walk_and_test_polyline
 from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
-from ..surfaces import PolylineSurface
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
 from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
@@ -251,7 +249,7 @@ class ExactSceneGeometry:
         :meth:`ray_intersect` (``coherent`` too). With ``shadow``, also
         :meth:`ray_test` of that ray (lanes ``shadow_active``): a single
         polyline lathe then answers both rays with one traced traversal
-        (:func:`_walk_and_test_lathe`), compiled once instead of twice,
+        (:meth:`LatheShape.walk_and_test_exact`), compiled once instead of twice,
         which shortens a render's first, uncached compilation. Returns the
         interaction (``t`` along ``ray``), the walk to pass with the next
         ray and whether ``shadow`` is occluded (False without it)."""
@@ -291,8 +289,8 @@ class ExactSceneGeometry:
             if shadow is None:
                 si_lathe, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, t0)
             else:
-                si_lathe, s, key, blocked = _walk_and_test_lathe(
-                    lathe, line, active, after_s, after_key, t0, shadow, shadow_active & ~occluded)
+                si_lathe, s, key, blocked = lathe.walk_and_test_exact(
+                    line, active, after_s, after_key, t0, shadow, shadow_active & ~occluded)
                 occluded |= blocked
             place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
             # (the margin holds against the rest only: between lathes the
@@ -358,26 +356,6 @@ class ExactSceneGeometry:
         for group in self.groups:
             occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
-
-
-def _walk_and_test_lathe(lathe: LatheShape, line: mi.Ray3f, active: mi.Bool, after_s: mi.Float,
-                         after_key: mi.UInt32, after_t: mi.Float, shadow: mi.Ray3f, shadow_active: mi.Bool
-                         ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32, mi.Bool]:
-    """``lathe.next_crossing_exact(line, active, after_s, after_key,
-    after_t)`` and ``lathe.ray_test_exact(shadow, shadow_active)``: ``(si,
-    s, key, occluded)``. A polyline lathe answers both with one traced
-    traversal (:func:`~lathe_shape.kernels.polyline.walk_and_test_polyline`),
-    through the lathe's own transform and interaction, as its two queries
-    would; other kinds with their two queries."""
-    if not isinstance(lathe.surface, PolylineSurface):
-        si, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, after_t)
-        return si, s, key, lathe.ray_test_exact(shadow, shadow_active)
-    to_local = lathe._to_local  # (as LatheShape.next_crossing_exact and ray_test_exact)
-    o, d = to_local @ line.o, to_local @ line.d
-    hit, s, key, occluded = walk_and_test_polyline(
-        lathe.surface.data, o, d, mi.Float(line.maxt), active, after_s, after_key, after_t,
-        to_local @ shadow.o, to_local @ shadow.d, mi.Float(shadow.maxt), mi.Bool(shadow_active))
-    return lathe._interaction(line, o, d, hit), s, key, occluded
 
 
 def _exact(shape: mi.Shape) -> bool:

@@ -391,6 +391,22 @@ class LatheShape(mi.Mesh):
                                                  after_t)
         return self._interaction(line, o, d, hit), s, key
 
+    def walk_and_test_exact(self, line: mi.Ray3f, active: mi.Bool, after_s: mi.Float, after_key: mi.UInt32,
+                            after_t: mi.Float, shadow: mi.Ray3f, shadow_active: mi.Bool
+                            ) -> tuple[mi.SurfaceInteraction3f, mi.Float, mi.UInt32, mi.Bool]:
+        """:meth:`next_crossing_exact` of ``line`` and :meth:`ray_test_exact`
+        of the world-space ``shadow`` ray together: ``(si, s, key,
+        occluded)``. A polyline lathe answers both with one traversal."""
+        active = mi.Bool(active)
+        o = self._to_local @ line.o
+        d = self._to_local @ line.d
+        shadow_o = self._to_local @ shadow.o
+        shadow_d = self._to_local @ shadow.d
+        hit, s, key, occluded = self.surface.walk_and_test(
+            o, d, mi.Float(line.maxt), active, after_s, after_key, after_t,
+            shadow_o, shadow_d, mi.Float(shadow.maxt), mi.Bool(shadow_active))
+        return self._interaction(line, o, d, hit), s, key, occluded
+
     def ray_test_exact(self, ray: mi.Ray3f, active: mi.Bool = True) -> mi.Bool:
         """Shadow-ray test: does the world-space ray hit the lathe before
         ``ray.maxt``?"""
