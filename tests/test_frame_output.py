@@ -99,3 +99,26 @@ def test_one_render_thread_runs_every_call_on_one_thread():
     first.join(10)  # the thread ends with the block
     assert not first.is_alive()
     assert interruptible(threading.current_thread) is not first  # a thread per call again
+
+
+def test_threads_option_caps_the_frame_writers(tmp_path, capsys, monkeypatch):
+    from conftest import SCENES, VARIANT
+
+    from lathe_shape.cli.turntable import main
+    from lathe_shape.tools import writer
+
+    made = []
+
+    class Recording(writer.FrameWriter):
+        def __init__(self, depth=None, workers=1):
+            made.append(workers)
+            super().__init__(depth, workers)
+
+    monkeypatch.setattr(writer, "FrameWriter", Recording)
+    monkeypatch.setattr(writer, "default_workers", lambda frame_bytes=0: 4)
+    job = [str(SCENES / "wine_glass.xml"), "--variant", VARIANT, "--count", "2", "--spp", "1",
+           "--resolution", "8x8", "-D", "mesh_segments=8", "-D", "max_depth=2", "--force"]
+    assert main([*job, "-o", str(tmp_path / "a")]) == 0
+    assert main([*job, "-o", str(tmp_path / "b"), "--threads", "1"]) == 0
+    capsys.readouterr()
+    assert made == [4, 1]

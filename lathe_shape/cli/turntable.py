@@ -87,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--threads", type=int, metavar="N",
-        help="Dr.Jit worker threads (default: all cores); 1 makes LLVM renders bit-reproducible also with "
+        help="Dr.Jit worker threads, and at most as many frame writers (default: all cores); 1 makes LLVM "
+        "renders bit-reproducible also with "
         "reconstruction filters wider than a pixel (e.g. gaussian), whose splats are summed in thread order",
     )
     parser.add_argument("--force", action="store_true", help="render finished frames again")
@@ -353,7 +354,10 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
     # the frame being written the encoders' buffers (8-bit pixels and their
     # compressed copy, half-float EXR channels: ~24 bytes per pixel).
     frame_bytes = job.size[0] * job.size[1] * (4 * (12 if job.denoiser is not None else 3) + 24 // 2)
-    with one_render_thread(), FrameWriter(workers=default_workers(frame_bytes)) as writer:
+    workers = default_workers(frame_bytes)
+    if job.args.threads is not None:  # (--threads caps the command's CPU use)
+        workers = min(workers, job.args.threads)
+    with one_render_thread(), FrameWriter(workers=workers) as writer:
         for frame in todo:
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
                 progress.advance(None)
