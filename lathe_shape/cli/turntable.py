@@ -368,7 +368,9 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
             seconds = time.perf_counter() - start
             cleaned = None
             if job.denoiser is not None and job.denoiser.backend == "optix":
-                # OptiX runs on the renderer's GPU stream: not from another thread.
+                # OptiX denoises here, on this thread's Dr.Jit (CUDA) state, where its
+                # denoiser was made: never in a writer thread. (Untested on a GPU with
+                # the OptiX weights: the one lent had none.)
                 cleaned = clean_frame(job, image)
             writer.submit(functools.partial(finish_frame, job, frame, image, seconds, cleaned))
             progress.advance(seconds)
