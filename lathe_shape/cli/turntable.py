@@ -240,8 +240,8 @@ def open_job(args: argparse.Namespace) -> Job:
     size = tuple(int(v) for v in sensor.film().size())
     spp = args.spp or sensor.sampler().sample_count()
     notes = tuple(turntable.warnings) + ((note,) if note else ())
-    if args.multijitter and rendered_spp(sensor.sampler(), spp) != spp:
-        rounded = rendered_spp(sensor.sampler(), spp)
+    rounded = rendered_spp(sensor.sampler(), spp) if args.multijitter else spp
+    if rounded != spp:
         notes += (f"the {sensor.sampler().class_name()} takes {rounded} samples per pixel for --spp {spp}",)
         spp = rounded
     check_render_budget(*size, spp)
