@@ -384,17 +384,18 @@ class _Stack:
         self.s = dr.alloc_local(mi.Float, BVH_DEPTH + 1)
 
     @dr.syntax
-    def advance(self, depth, s_best, go, near, push, far, far_s):
-        """After a visit: ``(node, depth, more)``, the node to visit next
-        (``near`` where ``go``, else the top of the stack that the ray enters
-        before ``s_best``), the new stack depth (``far`` pushed, entered at
-        ``far_s``, where ``push``) and whether a node is left.
+    def advance(self, depth, s_best, go, near, near_s, push, far, far_s):
+        """After a visit: ``(node, node_s, depth, more)``, the node to visit
+        next (``near`` where ``go``, else the top of the stack that the ray
+        enters before ``s_best``), where the ray enters it, the new stack
+        depth (``far`` pushed where ``push``) and whether a node is left.
         ``depth`` must start as an array of the rays' width: from a scalar
         0, Dr.Jit 1.5 read back wrong entries."""
         slot = dr.minimum(depth, BVH_DEPTH)
         self.node[slot] = far   # kept only where pushed (the slot is free)
         self.s[slot] = far_s
         node = mi.UInt32(near)                     # node to visit next
+        node_s = mi.Float(near_s)                  # where the ray enters it
         more = mi.Bool(go)                         # whether there is one
         depth = dr.select(push, depth + 1, depth)  # entries on the stack
         pop = ~go & (depth > 0)                    # whether to pop one
@@ -402,16 +403,17 @@ class _Stack:
         while pop:
             depth -= 1
             node = self.node[depth]
-            more = self.s[depth] <= s_best
+            node_s = self.s[depth]
+            more = node_s <= s_best
             pop = ~more & (depth > 0)
-        return node, depth, more
+        return node, node_s, depth, more
 
 
 def _children(ray: _Ray, node, link, box0, box1, s_best, inner):
     """An inner node's two children (boxes ``box0``, ``box1``, see
-    ``PolylineData.nodes``): ``(go, near, push, far, far_s)``: visit
-    ``near`` next (where ``go``), and later ``far`` (where ``push``),
-    which the ray enters at ``far_s``; the child that the ray enters first (its slab
+    ``PolylineData.nodes``): ``(go, near, near_s, push, far, far_s)``: visit
+    ``near`` next (where ``go``), entering it at ``near_s``, and later
+    ``far`` (where ``push``); the child that the ray enters first (its slab
     and cylinder, :func:`enter_child_box`) is the near one, ties go to the
     first child (the copy's order)."""
     in0, s0 = enter_child_box(ray, box0, s_best)
@@ -420,8 +422,8 @@ def _children(ray: _Ray, node, link, box0, box1, s_best, inner):
     in1 &= inner
     swap = in1 & (~in0 | (s1 < s0))
     first, second = node + 1, link
-    return (in0 | in1, dr.select(swap, second, first), in0 & in1, dr.select(swap, first, second),
-            dr.select(swap, s0, s1))
+    return (in0 | in1, dr.select(swap, second, first), dr.select(swap, s1, s0), in0 & in1,
+            dr.select(swap, first, second), dr.select(swap, s0, s1))
 
 
 @dr.syntax
@@ -618,7 +620,8 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     of the traversal."""
     stack = _Stack()
     node = mi.UInt32(ray.first)          # node to visit (the root: the ray is clipped to its box)
-    depth = dr.zeros(mi.UInt32, dr.width(node))  # nodes on the stack
+    node_s = mi.Float(ray.s_lo)          # where the ray enters it
+    depth = dr.zeros(mi.UInt32, dr.width(node_s))  # nodes on the stack
     more = mi.Bool(ray.active)           # whether a node is left to visit
     s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
     key = dr.zeros(mi.UInt32, dr.width(s_best))  # its key (_Key)
@@ -633,7 +636,7 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
         u = dr.select(hit, u_hit, u)
         seg = dr.select(hit, seg_hit, seg)
         found |= hit
-        node, depth, more = stack.advance(depth, s_best, *children)
+        node, node_s, depth, more = stack.advance(depth, s_best, *children)
 
     t = ray.s_enter + s_best
     valid = found & (t > 0) & (t < ray.tmax)
@@ -767,7 +770,7 @@ def occluded_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
         children, s_hit, _, _, hit, _, _ = _visit(data, ray, node, _Key(ray.s_hi), more)
         t = ray.s_enter + s_hit
         found |= hit & (t > 0) & (t < ray.tmax)
-        node, depth, more = stack.advance(depth, ray.s_hi, *children)
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return found
 
 
@@ -788,7 +791,7 @@ def count_crossings_polyline(data: PolylineData, o: mi.Point3f, d: mi.Vector3f,
     while more:
         children, _, _, _, _, _, count = _visit(data, ray, node, _Key(ray.s_hi), more)
         total += count
-        node, depth, more = stack.advance(depth, ray.s_hi, *children)
+        node, _, depth, more = stack.advance(depth, ray.s_hi, *children)
     return total
 
 
