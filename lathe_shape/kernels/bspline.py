@@ -172,12 +172,12 @@ __all__ = [
 #: powers of t).
 _STRIDE = 8
 
-#: Floats per leaf in ``BSplineData.leaf`` (five Vector4f): Bezier control
-#: values R_b0..3 and Z_b0..3, power coefficients R_p0..3 and Z_p0..3 (all in
-#: the leaf's parameter u), then (t0, h, segment, r_squared): the last is 1
-#: where the R slots hold R^2 (the sor kind; the kernel reads the flag from
-#: ``BSplineData``, see :func:`_squared`).
-_LEAF_STRIDE = 20
+#: Floats per leaf in ``BSplineData.leaf`` (three Vector4f): Bezier control
+#: values R_b0..3 and Z_b0..3 (in the leaf's parameter u; the kernel derives
+#: the power form from them, :func:`_bezier_to_power`), then (t0, h,
+#: segment, r_squared): the last is 1 where the R slots hold R^2 (the sor
+#: kind; the kernel reads the flag from ``BSplineData``, see :func:`_squared`).
+_LEAF_STRIDE = 12
 
 #: Longest leaf, in segment parameter t (before padding).
 _LEAF_T = 0.25
@@ -219,7 +219,7 @@ class BSplineData(LatheData):
 
     Attributes (besides those of :class:`~lathe_shape.kernels.common.LatheData`):
         seg: ``mi.Float`` of ``n_seg * 8`` values (see ``_STRIDE``).
-        leaf: ``mi.Float`` of ``n_leaf * 20`` values (see ``_LEAF_STRIDE``).
+        leaf: ``mi.Float`` of ``n_leaf * 12`` values (see ``_LEAF_STRIDE``).
         nodes: ``mi.Float``, 4 values per node of the four threaded BVH
             copies: the annular box ``(rmax, rmin^2, zmin, zmax)``.
         links: ``mi.UInt32`` per node: an inner node's miss link, or
@@ -365,7 +365,7 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
         # The end control points are the leaf's joints, shared bit for bit
         # with the neighbouring leaf (the parity rule of _take_interval)
         (rb[0], zb[0]), (rb[3], zb[3]) = start, end
-        leaves.append(np.concatenate([rb, zb, rp, zp, [ta, tb - ta, i, float(r_squared)]]))
+        leaves.append(np.concatenate([rb, zb, [ta, tb - ta, i, float(r_squared)]]))
         boxes.append([max(min(rmin, rb[0], rb[3]) - pad, 0.0), max(rmax, rb[0], rb[3]) + pad,
                       min(zmin, zb[0], zb[3]) - pad, max(zmax, zb[0], zb[3]) + pad])
     boxes = np.array(boxes)
@@ -1039,7 +1039,7 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
 def _leaf_to_segment(data: BSplineData, best: _Best, active):
     """The segment of the crossing ``best`` and its parameter there, ``t =
     t0 + h u`` (the leaf's placement in its segment)."""
-    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 4, active)
+    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 2, active)
     return mi.UInt32(meta.z), dr.fma(meta.y, best.u, meta.x)
 
 

@@ -21,6 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.bspline import (
+    _LEAF_STRIDE,
     BSplineData,
     build_bspline_data,
     count_crossings_bspline,
@@ -38,7 +39,7 @@ __all__ = ["leaf_joints", "curve_data", "profile_file_data", "crossing_walk_bspl
 def leaf_joints(data: BSplineData) -> np.ndarray:
     """The ``(r, z)`` start points of the leaves of ``data`` and the end of
     the last one (local frame, float64): the joints where two leaves meet."""
-    leaf = np.asarray(data.leaf.numpy(), dtype=np.float64).reshape(-1, 20)
+    leaf = np.asarray(data.leaf.numpy(), dtype=np.float64).reshape(-1, _LEAF_STRIDE)
     size = float(data.scale.numpy()[0])
     shift = float(data.z_shift.numpy()[0])
     r = np.append(leaf[:, 0], leaf[-1, 3])
