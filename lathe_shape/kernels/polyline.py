@@ -620,7 +620,8 @@ def _first_crossing(data: PolylineData, ray: _Ray, keyed: bool):
     of the traversal."""
     stack = _Stack()
     node = mi.UInt32(ray.first)          # node to visit (the root: the ray is clipped to its box)
-    node_s = mi.Float(ray.s_lo)          # where the ray enters it
+    node_s = mi.Float(ray.s_lo)          # where the ray enters it (read nowhere; without it, Dr.Jit 1.5
+    #                                      once emitted a callable twice in a later lathe_prb kernel)
     depth = dr.zeros(mi.UInt32, dr.width(node_s))  # nodes on the stack
     more = mi.Bool(ray.active)           # whether a node is left to visit
     s_best = mi.Float(ray.s_hi)          # first crossing so far (moved frame)
