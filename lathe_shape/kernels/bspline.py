@@ -43,13 +43,13 @@ of ``R`` and ``Z`` and is handled exactly like a B-spline.
 Leaves. Every segment is cut, at the interior extrema of ``R`` and ``Z`` and
 then evenly into pieces of at most ``_LEAF_T`` in ``t``, into leaves. A leaf
 covers ``t = t0 + h u``, ``u`` in [0, 1] (no overlap with its neighbours),
-and stores its cubics in that local parameter, both in power form and as
-Bernstein (Bezier) control points, plus an exact, padded annular bounding
-box. Its first and last control points are its joints: one float32 point per
-joint, stored bit for bit alike in the two leaves that meet there (also
-where segments meet, and where a closed curve closes). The kernel reads only
-the control points (two loads of four floats; the power form follows from
-them in a few operations), and a crossing carries its leaf and ``u``: the
+and stores its cubics in that local parameter as Bernstein (Bezier) control
+points, plus an exact, padded annular bounding box. Its first and last
+control points are its joints: one float32 point per joint, stored bit for
+bit alike in the two leaves that meet there (also where segments meet, and
+where a closed curve closes). The kernel reads the control points (two
+loads of four floats; the power form follows from them in a few
+operations), and a crossing carries its leaf and ``u``: the
 segment and its ``t`` are read once per ray, for the crossing taken.
 
 Joints: parity first. A ray aimed at a joint may, after float32 rounding,
