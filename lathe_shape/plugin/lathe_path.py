@@ -108,6 +108,55 @@ def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
+def contradicts(si: mi.SurfaceInteraction3f, cos_in_geo: mi.Float, bs: mi.BSDFSample3f,
+                wo_world: mi.Vector3f) -> mi.Bool:
+    """Eq. 11, outgoing side: whether the sampled direction ``wo_world``
+    contradicts the real surface (a reflection must stay on the incident
+    side of the geometric normal, a transmission must cross it);
+    ``cos_in_geo`` is the incident direction's cosine with ``si.n``."""
+    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
+    side = cos_in_geo * dr.dot(si.n, wo_world)
+    return (bs.pdf > 0.0) & dr.select(reflected, side <= 0.0, side >= 0.0)
+
+
+@dr.syntax
+def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
+                         wo_em: mi.Vector3f, samples: tuple, redraws: tuple, cos_in_geo: mi.Float,
+                         checked: mi.Bool, active: mi.Bool) -> tuple:
+    """The ``fallback`` policy's BSDF sampling: one ``eval_pdf_sample``
+    call (the light direction ``wo_em``'s value and pdf, and a sampled
+    direction), redone with the geometric frame and the ``redraws`` where
+    the ``checked`` lanes' sample contradicts the real surface (eq. 11).
+    Both passes go through the same call site in a loop, so the BSDFs'
+    code is compiled once; packets without a contradicting vertex run it
+    once. Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the light
+    direction's value and pdf are those of the first pass."""
+    wi_world = si.to_world(si.wi)
+    value_em = mi.Spectrum(0.0)                  # Light direction's BSDF value (first pass)
+    pdf_em = mi.Float(0.0)                       # ... and its pdf
+    bs = dr.zeros(mi.BSDFSample3f)               # Sampled direction (last pass)
+    weight = mi.Spectrum(0.0)                    # ... its weight
+    wo_world = mi.Vector3f(0.0)                  # ... and its world direction
+    geometric = dr.zeros(mi.Bool, dr.width(wi_world))  # Lanes redrawing with the geometric frame
+    todo = mi.Bool(active)                       # Lanes with a pass still to run
+    while todo:
+        si_pass = mi.SurfaceInteraction3f(si)
+        si_pass.sh_frame = dr.select(geometric, mi.Frame3f(si.n), si.sh_frame)
+        si_pass.wi = dr.select(geometric, si_pass.to_local(wi_world), si.wi)
+        sample_1 = dr.select(geometric, redraws[0], samples[0])
+        sample_2 = dr.select(geometric, redraws[1], samples[1])
+        value, pdf, bs_pass, weight_pass = bsdf.eval_pdf_sample(ctx, si_pass, wo_em, sample_1, sample_2, todo)
+        first = todo & ~geometric
+        value_em = dr.select(first, value, value_em)
+        pdf_em = dr.select(first, pdf, pdf_em)
+        bs = dr.select(todo, bs_pass, bs)
+        weight = dr.select(todo, weight_pass, weight)
+        wo_world = dr.select(todo, si_pass.to_world(bs_pass.wo), wo_world)
+        geometric = first & checked & contradicts(si, cos_in_geo, bs_pass, wo_world)
+        todo = geometric
+    return value_em, pdf_em, bs, weight, wo_world
+
+
 def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool) -> mi.SurfaceInteraction3f:
     """``si`` with its shading frame replaced by the geometric normal where
     ``use`` is set (``wi`` re-expressed in the new frame)."""
@@ -270,33 +319,23 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
             # (on every surface hit, as path: a path ending on a null
             # surface must still see its sampled type, for the alpha)
-            bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
-                bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
+            if dr.hint(check == "fallback", mode="scalar"):
+                # Eq. 11, outgoing side, where the sample contradicts the
+                # real surface: redone with the geometric normal, through
+                # the same BSDF call (compiled once)
+                redraws = (sampler.next_1d(), sampler.next_2d())
+                bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight, wo_world = sample_with_fallback(
+                    bsdf, bsdf_ctx, si, wo_em, (sample_1, sample_2), redraws, cos_in_geo, active_next,
+                    active & valid)
+            else:
+                bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
+                    bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
+                wo_world = si.to_world(bs.wo)
+                if dr.hint(check == "terminate", mode="scalar"):
+                    # Eq. 11, outgoing side: such a path ends here
+                    active_next &= ~contradicts(si, cos_in_geo, bs, wo_world)
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf_em))
             em_value = beta * mis_em * bsdf_val_em * em_weight
-
-            # ----------------------- BSDF sampling -----------------------
-            wo_world = si.to_world(bs.wo)
-
-            # --- Eq. 11, outgoing side: R must stay on the incident side of
-            # the real surface, T must cross it ---
-            if dr.hint(check != "none", mode="scalar"):
-                reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
-                side = cos_in_geo * dr.dot(si.n, wo_world)
-                bad_out = active_next & (bs.pdf > 0.0) & dr.select(reflected, side <= 0.0, side >= 0.0)
-                if dr.hint(check == "fallback", mode="scalar"):
-                    # Redo this vertex's sampling with the geometric normal,
-                    # in a symbolic if: packets without a contradicting
-                    # vertex (nearly all) skip the second BSDF call.
-                    redo_1, redo_2 = sampler.next_1d(), sampler.next_2d()
-                    if bad_out:
-                        si_geo = with_geometric_frame(si, bad_out)
-                        bs_geo, weight_geo = bsdf.sample(bsdf_ctx, si_geo, redo_1, redo_2, bad_out)
-                        bs = dr.select(bad_out, bs_geo, bs)
-                        bsdf_weight = dr.select(bad_out, weight_geo, bsdf_weight)
-                        wo_world = dr.select(bad_out, si_geo.to_world(bs_geo.wo), wo_world)
-                else:
-                    active_next &= ~bad_out
 
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
