@@ -122,15 +122,18 @@ def contradicts(si: mi.SurfaceInteraction3f, cos_in_geo: mi.Float, bs: mi.BSDFSa
 @dr.syntax
 def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
                          wo_em: mi.Vector3f, samples: tuple, redraws: tuple, cos_in_geo: mi.Float,
-                         checked: mi.Bool, active: mi.Bool) -> tuple:
+                         checked: mi.Bool, active: mi.Bool, geo_frame: mi.Frame3f | None = None) -> tuple:
     """The ``fallback`` policy's BSDF sampling: one ``eval_pdf_sample``
     call (the light direction ``wo_em``'s value and pdf, and a sampled
     direction), redone with the geometric frame and the ``redraws`` where
     the ``checked`` lanes' sample contradicts the real surface (eq. 11).
     Both passes go through the same call site in a loop, so the BSDFs'
     code is compiled once; packets without a contradicting vertex run it
-    once. Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the light
-    direction's value and pdf are those of the first pass."""
+    once. ``geo_frame``: ``mi.Frame3f(si.n)`` if the caller has it (else
+    made here). Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the
+    light direction's value and pdf are those of the first pass."""
+    if geo_frame is None:
+        geo_frame = mi.Frame3f(si.n)
     wi_world = si.to_world(si.wi)
     value_em = mi.Spectrum(0.0)                  # Light direction's BSDF value (first pass)
     pdf_em = mi.Float(0.0)                       # ... and its pdf
@@ -141,7 +144,7 @@ def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceIn
     todo = mi.Bool(active)                       # Lanes with a pass still to run
     while todo:
         si_pass = mi.SurfaceInteraction3f(si)
-        si_pass.sh_frame = dr.select(geometric, mi.Frame3f(si.n), si.sh_frame)
+        si_pass.sh_frame = dr.select(geometric, geo_frame, si.sh_frame)
         si_pass.wi = dr.select(geometric, si_pass.to_local(wi_world), si.wi)
         sample_1 = dr.select(geometric, redraws[0], samples[0])
         sample_2 = dr.select(geometric, redraws[1], samples[1])
@@ -157,12 +160,14 @@ def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceIn
     return value_em, pdf_em, bs, weight, wo_world
 
 
-def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool) -> mi.SurfaceInteraction3f:
+def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool,
+                         geo_frame: mi.Frame3f | None = None) -> mi.SurfaceInteraction3f:
     """``si`` with its shading frame replaced by the geometric normal where
-    ``use`` is set (``wi`` re-expressed in the new frame)."""
+    ``use`` is set (``wi`` re-expressed in the new frame); ``geo_frame``:
+    ``mi.Frame3f(si.n)`` if the caller has it (else made here)."""
     si = mi.SurfaceInteraction3f(si)
     wi_world = si.to_world(si.wi)
-    si.sh_frame = dr.select(use, mi.Frame3f(si.n), si.sh_frame)
+    si.sh_frame = dr.select(use, mi.Frame3f(si.n) if geo_frame is None else geo_frame, si.sh_frame)
     si.wi = si.to_local(wi_world)
     return si
 
@@ -283,7 +288,10 @@ class LathePathIntegrator(mi.SamplingIntegrator):
             if dr.hint(check == "terminate", mode="scalar"):
                 active_next &= ~bad_in
             elif dr.hint(check == "fallback", mode="scalar"):
-                si = with_geometric_frame(si, bad_in)
+                # (the geometric frame is made once, for both redraws of
+                # this vertex: its code is in the render kernel once)
+                geo_frame = mi.Frame3f(si.n)
+                si = with_geometric_frame(si, bad_in, geo_frame)
 
             bsdf = si.bsdf(ray)
 
@@ -326,7 +334,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 redraws = (sampler.next_1d(), sampler.next_2d())
                 bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight, wo_world = sample_with_fallback(
                     bsdf, bsdf_ctx, si, wo_em, (sample_1, sample_2), redraws, cos_in_geo, active_next,
-                    active & valid)
+                    active & valid, geo_frame)
             else:
                 bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
                     bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
