@@ -7,15 +7,15 @@ area emitters and textures are the same), Mitsuba traces it, and every lathe's
 exact kernel is run with the ray's ``maxt`` shortened to that hit. The lathes'
 reference triangles are therefore never reported.
 
-The surface interaction of a hit on those few shapes is computed by a direct
-call per shape (:func:`rest_interaction`), not by Mitsuba's virtual call over
-``mi.ShapePtr``: Dr.Jit records that call once for every shape alive in the
-process (lathes included, whether in this scene or not), on every render, and
-its cost grew with the lathe count far more than the lathes' own traversal.
-This is done in scenes of at least :data:`DIRECT_LATHES` lathes: with few
-shapes alive Mitsuba's call is the faster (a one-lathe scene renders about
-5% slower through the direct calls). More than :data:`DIRECT_SHAPES` such
-shapes, or instances among them, go through Mitsuba's call as well.
+The surface interaction of a hit on those few shapes is computed by calls
+of their own methods (:func:`rest_interaction`), not by Mitsuba's virtual
+call over ``mi.ShapePtr``: Dr.Jit records that call once for every shape
+alive in the process (lathes included, whether in this scene or not), on
+every render: the render kernel would hold the lathes' reference meshes'
+code (never run: the second scene has no lathe), and with many lathes its
+cost grew with the lathe count far more than the lathes' own traversal.
+More than :data:`DIRECT_SHAPES` such shapes, or instances among them, go
+through Mitsuba's call.
 
 Lathes are intersected by kind (see kernels/top_level.py): a kind with
 several lathes goes through one :class:`~lathe_shape.kernels.top_level.LatheSet`
@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 from operator import attrgetter, is_not
 
 import drjit as dr
@@ -387,35 +388,45 @@ def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
     return hit, dr.select(take, t_ray, t_best), walk, take
 
 
-#: Most non-lathe shapes whose surface interactions are computed by direct
-#: calls rather than by Mitsuba's virtual call (which traces every shape
-#: alive, lathes included, on each render).
+#: Most non-lathe shapes whose surface interactions are computed by
+#: :func:`rest_interaction` rather than by Mitsuba's virtual call (which
+#: traces every shape alive, lathes included, on each render).
 DIRECT_SHAPES = 8
-#: The fewest lathes in a scene for which :func:`rest_interaction` is used.
-DIRECT_LATHES = 32
 
 
 def direct_interaction(shapes: list[mi.Shape], lathe_count: int) -> bool:
     """Whether :func:`rest_interaction` should serve ``shapes`` in a scene
-    of ``lathe_count`` lathes: many lathes (see the module docstring), few
-    other shapes, none an instance (whose hits name the instance, not the
-    shape)."""
-    return (lathe_count >= DIRECT_LATHES and len(shapes) <= DIRECT_SHAPES
+    of ``lathe_count`` lathes: some lathes (without, the scene is traced as
+    it is), few other shapes, none an instance (whose hits name the
+    instance, not the shape)."""
+    return (lathe_count > 0 and len(shapes) <= DIRECT_SHAPES
             and all(s.class_name() != "Instance" for s in shapes))
 
 
 def rest_interaction(shapes: list[mi.Shape], ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
                      active: mi.Bool) -> mi.SurfaceInteraction3f:
     """Mitsuba's ``pi.compute_surface_interaction(ray)`` for a scene made of
-    ``shapes``, with one direct call per shape instead of the virtual call
-    over ``mi.ShapePtr``: Dr.Jit records that call for every shape
-    registered in the process (a thousand lathes' proxies included) on
-    every render, though only these can be hit."""
+    ``shapes``, calling only these shapes' own ``compute_surface_interaction``
+    instead of the virtual call over ``mi.ShapePtr``: Dr.Jit records that
+    call for every shape registered in the process (a lathe's reference
+    mesh, or a thousand lathes' proxies, included) on every render, though
+    only these can be hit. One shape is called directly; several through a
+    ``dr.switch`` whose targets leave the interaction's ``shape`` null (it
+    is ``pi.shape``, set after the call), so that the targets of shapes with
+    the same code (two rectangles) are one function of the compiled kernel."""
     active = mi.Bool(active) & pi.is_valid()
-    si = dr.zeros(mi.SurfaceInteraction3f)
-    for shape in shapes:
-        here = active & (pi.shape == mi.ShapePtr(shape))
-        si = dr.select(here, shape.compute_surface_interaction(ray, pi, mi.RayFlags.All, here), si)
+    if len(shapes) > 1:
+        index = dr.zeros(mi.UInt32, dr.width(pi.t))  # position of the hit shape in shapes
+        for k, shape in enumerate(shapes[1:], 1):
+            index = dr.select(pi.shape == mi.ShapePtr(shape), k, index)
+        si = dr.switch(index, [functools.partial(_shape_interaction, shape) for shape in shapes],
+                       ray, pi, active)
+        si.shape = pi.shape
+    else:
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        for shape in shapes:
+            here = active & (pi.shape == mi.ShapePtr(shape))
+            si = dr.select(here, shape.compute_surface_interaction(ray, pi, mi.RayFlags.All, here), si)
     # What SurfaceInteraction::finalize_surface_interaction does after the call.
     si.t = dr.select(active, si.t, dr.inf)
     valid = active & si.is_valid()
@@ -427,6 +438,15 @@ def rest_interaction(shapes: list[mi.Shape], ray: mi.Ray3f, pi: mi.PreliminaryIn
     si.wi = dr.select(valid, si.to_local(-ray.d), -ray.d)
     si.duv_dx = dr.zeros(mi.Point2f)
     si.duv_dy = dr.zeros(mi.Point2f)
+    return si
+
+
+def _shape_interaction(shape: mi.Shape, ray: mi.Ray3f, pi: mi.PreliminaryIntersection3f,
+                       active: mi.Bool) -> mi.SurfaceInteraction3f:
+    """A target of :func:`rest_interaction`'s switch: ``shape``'s own
+    interaction with a null ``shape`` field (no per-shape literal)."""
+    si = shape.compute_surface_interaction(ray, pi, mi.RayFlags.All, active)
+    si.shape = dr.zeros(mi.ShapePtr, dr.width(si.t))
     return si
 
 
