@@ -228,7 +228,7 @@ class ExactSceneGeometry:
             si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
             take = si_group.t < si.t
             si, won = dr.select(take, si_group, si), won | take
-        return dr.select(won, si, self._rest_interaction(ray, pi, active & ~won))
+        return _with_wi(dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), ray)
 
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
                            coherent: mi.Bool | bool = False) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
@@ -312,7 +312,7 @@ class ExactSceneGeometry:
         si = self._rest_interaction(ray, pi, active & ~won)
         for take, hit in hits:
             si = dr.select(take, hit, si)
-        return si, walk, occluded
+        return _with_wi(si, ray), walk, occluded
 
     def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
                           ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
@@ -366,6 +366,16 @@ def _exact(shape: mi.Shape) -> bool:
     would shadow its own light. So an emitting lathe is traced as its
     reference mesh, as stock integrators trace it."""
     return isinstance(shape, LatheShape) and shape.emitter() is None
+
+
+def _with_wi(si: mi.SurfaceInteraction3f, ray: mi.Ray3f) -> mi.SurfaceInteraction3f:
+    """``si``, chosen among the lathes' and the other shapes' interactions
+    with ``ray``'s direction, with its ``wi`` made once for all of them, as
+    each makes it (Mitsuba's ``finalize_surface_interaction``,
+    ``lathe_interaction``: the valid lanes' ``-ray.d`` in the shading
+    frame, else ``-ray.d``): the kernel computes it once, not per source."""
+    si.wi = dr.select(si.is_valid(), si.to_local(-ray.d), -ray.d)
+    return si
 
 
 def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f, place: CrossingPlace,
