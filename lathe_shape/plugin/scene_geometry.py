@@ -113,9 +113,9 @@ class ExactSceneGeometry:
                     "lathes in a scene of their own, and Mitsuba cannot place an instance there. "
                     "Replace the instances by shapes, or render the scene with a stock integrator."
                 )
-        #: The non-lathe shapes whose surface interaction is computed by a
-        #: direct call each (see :func:`rest_interaction`); ``None``: by
-        #: Mitsuba's own call (too many of them, or instances).
+        #: The non-lathe shapes whose surface interaction is computed by
+        #: their own calls (see :func:`rest_interaction`); ``None``: by
+        #: Mitsuba's call (no lathes, too many shapes, or instances).
         self.direct = others if direct_interaction(others, len(self.lathes)) else None
         if not self.lathes:
             self.rest = scene
