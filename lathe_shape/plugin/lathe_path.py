@@ -122,18 +122,16 @@ def contradicts(si: mi.SurfaceInteraction3f, cos_in_geo: mi.Float, bs: mi.BSDFSa
 @dr.syntax
 def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
                          wo_em: mi.Vector3f, samples: tuple, redraws: tuple, cos_in_geo: mi.Float,
-                         checked: mi.Bool, active: mi.Bool, geo_frame: mi.Frame3f | None = None) -> tuple:
+                         checked: mi.Bool, active: mi.Bool, geo_frame: mi.Frame3f) -> tuple:
     """The ``fallback`` policy's BSDF sampling: one ``eval_pdf_sample``
     call (the light direction ``wo_em``'s value and pdf, and a sampled
     direction), redone with the geometric frame and the ``redraws`` where
     the ``checked`` lanes' sample contradicts the real surface (eq. 11).
     Both passes go through the same call site in a loop, so the BSDFs'
     code is compiled once; packets without a contradicting vertex run it
-    once. ``geo_frame``: ``mi.Frame3f(si.n)`` if the caller has it (else
-    made here). Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the
+    once. ``geo_frame``: ``mi.Frame3f(si.n)``, made once by the caller for
+    this vertex. Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the
     light direction's value and pdf are those of the first pass."""
-    if geo_frame is None:
-        geo_frame = mi.Frame3f(si.n)
     wi_world = si.to_world(si.wi)
     value_em = mi.Spectrum(0.0)                  # Light direction's BSDF value (first pass)
     pdf_em = mi.Float(0.0)                       # ... and its pdf

@@ -64,7 +64,7 @@ import numpy as np
 from mitsuba.ad.integrators.common import RBIntegrator, mis_weight, solid_angle_to_area_jacobian
 
 from .attached_hits import attach_lathe_hits, differentiable_lathes
-from .lathe_path import NORMAL_CHECKS, with_geometric_frame
+from .lathe_path import NORMAL_CHECKS, contradicts, with_geometric_frame
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
@@ -103,15 +103,6 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     inv_pdf = dr.select(ds.pdf != 0, dr.rcp(ds.pdf), 0)
     em_weight = dr.replace_grad(em_weight, em_val * dr.detach(inv_pdf)) * dr.relative_grad(J)
     return ds, em_weight
-
-
-def _contradicts_outgoing(bs: mi.BSDFSample3f, wo_world: mi.Vector3f, n: mi.Normal3f, cos_in_geo: mi.Float,
-                          active: mi.Bool) -> mi.Bool:
-    """Eq. 11, outgoing side (detached): a reflected direction must stay on
-    the incident side of the real surface, a transmitted one must cross it."""
-    side = cos_in_geo * dr.dot(n, wo_world)
-    wrong_side = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection), side <= 0.0, side >= 0.0)
-    return active & (bs.pdf > 0.0) & wrong_side
 
 
 def _resample_geometric(bsdf: mi.BSDF, ctx: mi.BSDFContext, sampler: mi.Sampler, si: mi.SurfaceInteraction3f,
@@ -260,7 +251,7 @@ class LathePRBIntegrator(RBIntegrator):
                                           active_next)
             wo_world = si_used.to_world(bs.wo)
             if dr.hint(check != "none", mode="scalar"):
-                bad_out = _contradicts_outgoing(bs, wo_world, si_detached.n, cos_in_geo, active_next)
+                bad_out = active_next & contradicts(si_detached, cos_in_geo, bs, wo_world)  # eq. 11, detached
                 if dr.hint(check == "fallback", mode="scalar"):
                     bs, bsdf_weight, wo_world = _resample_geometric(bsdf, bsdf_ctx, sampler, si_used, bad_out,
                                                                     (bs, bsdf_weight, wo_world))
