@@ -87,16 +87,20 @@ def compared_frames(turntable: Turntable, angle: float, spp: int, high_spp: int,
                     stratified: Turntable | None = None) -> dict[str, np.ndarray]:
     """The (H, W, 3) frames :func:`denoise_errors` compares, by name: an
     ``spp`` frame noisy and denoised (with the integrator's guides, the
-    albedo guide only, no guides, and the converged guides of the
-    ``reference`` render: what better guides could give at most), a frame
-    of 4 x ``spp`` denoised and a ``high_spp`` frame; with ``backend``
+    albedo guide only, no guides, the converged guides of the
+    ``reference`` render: what better guides could give at most, the
+    reference's albedo guide with the frame's own normals, and the albedo
+    guide of the ``high_spp`` render with the frame's normals: how clean
+    the albedo guide must be), a frame of 4 x ``spp`` denoised and a
+    ``high_spp`` frame; with ``backend``
     None (no denoiser), the noisy frames only. A ``stratified`` turntable
     (the same scene, sampled as by ``lathe-turntable --multijitter``, see
     :func:`~lathe_shape.tools.denoise.multijitter_xml`) adds its ``spp``
     frame noisy and denoised (names ending ``_multijitter``)."""
     image = turntable.render(angle, spp=spp, seed=seed)
     rgb, albedo = image[..., :3], image[..., 3:6]
-    high = turntable.render(angle, spp=high_spp, seed=seed + 2)[..., :3]
+    high_image = turntable.render(angle, spp=high_spp, seed=seed + 2)
+    high = high_image[..., :3]
     denoise = Denoiser(backend) if backend is not None else None
 
     def guided(frame: np.ndarray) -> np.ndarray:  # denoised with its own guides
@@ -120,6 +124,8 @@ def compared_frames(turntable: Turntable, angle: float, spp: int, high_spp: int,
         f"denoised_{spp}spp_no_guides": denoise(rgb),
         f"noisy_{high_spp}spp": high,
         f"denoised_{spp}spp_reference_guides": denoise(rgb, reference[..., 3:6], reference[..., 6:9]),
+        f"denoised_{spp}spp_reference_albedo": denoise(rgb, reference[..., 3:6], image[..., 6:9]),
+        f"denoised_{spp}spp_{high_spp}spp_albedo": denoise(rgb, high_image[..., 3:6], image[..., 6:9]),
         f"denoised_{4 * spp}spp": guided(more),
         **frames,
     }
