@@ -39,9 +39,12 @@ def test_denoise_errors_on_the_glass():
         # Converged guides denoise better than the frame's own noisy ones.
         assert errors[f"denoised_8spp_reference_guides{against}"] < errors[f"denoised_8spp{against}"]
         # The albedo guide is the one that decides: the reference's, with the
-        # frame's own normals, denoises better than the frame's own guides,
-        # and so does the albedo of a 64 spp render.
-        assert errors[f"denoised_8spp_reference_albedo{against}"] < errors[f"denoised_8spp{against}"]
+        # frame's own normals, denoises about as well as both converged
+        # guides and better than the frame's own, and so does the albedo of
+        # a 64 spp render.
+        reference_albedo = errors[f"denoised_8spp_reference_albedo{against}"]
+        assert reference_albedo < 1.1 * errors[f"denoised_8spp_reference_guides{against}"]
+        assert reference_albedo < errors[f"denoised_8spp{against}"]
         assert errors[f"denoised_8spp_64spp_albedo{against}"] < errors[f"denoised_8spp{against}"]
         # Two independent 256 spp renders differ less than a 64 spp one from either.
         assert errors[f"second_reference_256spp{against}"] < errors[f"noisy_64spp{against}"]
