@@ -40,8 +40,8 @@ def test_denoise_errors_on_the_glass():
         assert errors[f"denoised_8spp_reference_guides{against}"] < errors[f"denoised_8spp{against}"]
         # The albedo guide is the one that decides: the reference's, with the
         # frame's own normals, denoises about as well as both converged
-        # guides and better than the frame's own, and so does the albedo of
-        # a 64 spp render.
+        # guides and better than the frame's own guides; the albedo of a
+        # 64 spp render, with the frame's normals, also beats the frame's own.
         reference_albedo = errors[f"denoised_8spp_reference_albedo{against}"]
         assert reference_albedo < 1.1 * errors[f"denoised_8spp_reference_guides{against}"]
         assert reference_albedo < errors[f"denoised_8spp{against}"]
