@@ -346,6 +346,8 @@ class _Ray(LatheRay):
         self.dz_oy = self.d.z * self.o.y
         # Crossings count after this key (t > 0: every one past s_lo)
         self.after = _Key(self.s_lo)
+        # Exactly horizontal (unit frame): every point of the ray at height o_z
+        self.level = self.d.z == 0
 
 
 def _roots(ray: _Ray, n_r, n_z, c):
@@ -566,6 +568,10 @@ def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real,
     u2, off2 = off_segment(s2)
     odd = _crossing_parity(data, ray, seg, has_root, active)
     pair = real & (n_r != 0) & (off1 <= tol_u) & (off2 <= tol_u)
+    # A horizontal ray's pair lies at its own height: the heights of the end
+    # points decide it exactly (the tolerance would give a joint's pair to
+    # both of its segments)
+    pair &= _level_straddles(data, ray, seg, active & pair & ray.level)
     first = off1 <= off2  # odd: s1 is the root nearer to the segment
     take1, take2 = dr.select(odd, first, pair), dr.select(odd, ~first, pair)
     # An odd segment's root off it (ill conditioned: a ray nearly along the
@@ -574,6 +580,30 @@ def _segment_roots(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real,
     move1, move2 = take1 & (off1 > tol_u), take2 & (off2 > tol_u)
     s1, s2 = _to_heights(data, ray, z0, rec1.z, tol_u, s1, s2, move1, move2, active & (move1 | move2))
     return take1, take2, s1, s2, u1, u2
+
+
+@dr.syntax
+def _level_straddles(data: PolylineData, ray: _Ray, seg, active):
+    """Where ``active`` (horizontal rays, ``d_z = 0``): whether segment
+    ``seg``'s end points lie on different sides of the ray's plane ``z =
+    o_z``; elsewhere true.
+
+    A horizontal line crosses a slanted segment's surface twice (or not at
+    all), both times at its own height, so the pair belongs to the segment
+    exactly when its heights straddle the ray's. The end points' heights
+    are those of the joint side tests (``seg_side``: bit-equal for both
+    segments of a joint); an end exactly at the ray's height takes the side
+    of the joint moved into the solid (``_side_points``), and below when
+    that too is level. So a joint at the ray's height gives its pair to one
+    of two segments that go on up or down, and none at a convex corner
+    (a grazing ray) (issue 24, item 13). Rare: packets without an active
+    lane skip it."""
+    straddles = mi.Bool(True)
+    if active:
+        z = [dr.gather(mi.Float, data.seg_side, seg * 8 + k, active) for k in (1, 3, 5, 7)]
+        above = [dr.select(z[k] == ray.o.z, z[k + 2] > ray.o.z, z[k] > ray.o.z) for k in (0, 1)]
+        straddles = above[0] != above[1]
+    return straddles
 
 
 @dr.syntax
