@@ -87,7 +87,7 @@ def attached_polyline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t:
     ``dt = -dF / (dF/dt)`` with ``dF/dt = n . d`` (eq. 23); ``p`` follows
     eq. 3, ``n`` eqs. 8-9 and ``sh_n`` eq. 10 at the attached point."""
     p0, delta, normal = _segment(points, index.ends, seg, active)
-    x = dr.detach(o + t * d)
+    x = o + dr.detach(t) * d  # the detached root on the (possibly moving) ray
     rho, cos_phi, sin_phi = _azimuth(x)
     residual = normal.x * rho + normal.y * x.z - dr.dot(normal, p0)
     slope = dr.detach(dr.dot(_revolve(normal, cos_phi, sin_phi), d))
@@ -135,7 +135,7 @@ def attached_bspline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t: 
     ``u`` (the segment's chord where the tangent vanishes, as the kernel)."""
     controls = [_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k, active), active)
                 for k in range(4)]
-    x = dr.detach(o + t * d)
+    x = o + dr.detach(t) * d  # the detached root on the (possibly moving) ray
     rho, cos_phi, sin_phi = _azimuth(x)
     curve, tangent = _curve(controls, u)
     g_z = x.z - curve.y

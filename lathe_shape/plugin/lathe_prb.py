@@ -58,6 +58,9 @@ this is the derivative almost everywhere of the rendered estimate.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -72,18 +75,13 @@ from .variants import register_jit_plugin
 
 __all__ = ["LathePRBIntegrator", "register"]
 
+#: The differential pass's longest path (its loop keeps every vertex's state
+#: for the reverse pass; ``max_depth = -1`` means this).
+MAX_DIFFERENTIAL_DEPTH = 64
+
 
 def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-
-
-def _moving_wi(lathes, ray_prev: mi.Ray3f, si_prev: mi.SurfaceInteraction3f,
-               si: mi.SurfaceInteraction3f, active: mi.Bool) -> mi.Vector3f:
-    """``si.wi`` with the derivative of the previous vertex's motion (a
-    lathe hit that moves with the profile turns the incident direction)."""
-    prev = attach_lathe_hits(lathes, ray_prev, si_prev)
-    wi_world = dr.normalize(prev.p - dr.detach(si.p))
-    return dr.select(active, dr.replace_grad(si.wi, si.to_local(wi_world)), si.wi)
 
 
 def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f,
@@ -105,14 +103,40 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     return ds, em_weight
 
 
-def _resample_geometric(bsdf: mi.BSDF, ctx: mi.BSDFContext, sampler: mi.Sampler, si: mi.SurfaceInteraction3f,
-                        redo: mi.Bool, drawn: tuple):
-    """The ``fallback`` policy: where ``redo``, the BSDF sample ``drawn`` =
-    (sample, weight, world direction) is drawn again in the geometric frame."""
-    si_geo = with_geometric_frame(si, redo)
-    bs_geo, weight_geo = bsdf.sample(ctx, si_geo, sampler.next_1d(), sampler.next_2d(), redo)
-    redrawn = (bs_geo, weight_geo, si_geo.to_world(bs_geo.wo))
-    return tuple(dr.select(redo, new, old) for new, old in zip(redrawn, drawn, strict=True))
+def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
+                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, samples: tuple, active: mi.Bool
+                        ) -> tuple[mi.Vector3f, mi.Spectrum]:
+    """The sampled direction ``wo_world`` and a factor of primal value 1
+    carrying the derivative of the sample's weight, at the attached vertex
+    ``si`` (the detached draw ``bs`` from ``samples``). Eq. 28: a Dirac
+    delta's direction is drawn again with the same samples in the attached
+    frame, so that it turns with the incident direction and the normal;
+    its weight follows the attached lobe value (a Fresnel term: the value
+    times the pdf of the sample, over the detached lobe choice). Eq. 29:
+    any other lobe's direction stays put and its weight follows the
+    attached BSDF value."""
+    delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+    bs_att, weight_att = bsdf.sample(ctx, si, samples[0], samples[1], active & delta)
+    wo_world = dr.select(delta, si.to_world(bs_att.wo), wo_world)
+    value = bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta)
+    value = dr.select(delta, weight_att * bs_att.pdf, value)
+    return wo_world, dr.select(dr.detach(value) != 0.0, dr.relative_grad(value), 1.0)
+
+
+@dataclasses.dataclass
+class _Path:
+    """The state of a path between two vertices."""
+
+    ray: mi.Ray3f              # The ray to the next vertex (it moves with the vertex that made it)
+    depth: mi.UInt32           # Number of surface interactions so far
+    L: mi.Spectrum             # Radiance gathered so far
+    β: mi.Spectrum             # Path throughput weight
+    η: mi.Float                # Product of relative IORs (Russian roulette)
+    active: mi.Bool            # Lanes whose path goes on
+    prev: mi.Interaction3f     # The previous vertex (detached), for MIS of hit emitters
+    bsdf_pdf_prev: mi.Float    # BSDF pdf of the direction that left it ...
+    bsdf_delta_prev: mi.Bool   # ... and whether it was a Dirac delta
+    valid_ray: mi.Bool         # Alpha: the camera ray met a surface or a visible environment
 
 
 class LathePRBIntegrator(RBIntegrator):
@@ -132,6 +156,7 @@ class LathePRBIntegrator(RBIntegrator):
         if self.silhouette_spp < 1:
             raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
         self._geometry = None
+        self._differentiating = False
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
         """The scene's exact-lathe ray queries (kept while the scene's
@@ -155,7 +180,8 @@ class LathePRBIntegrator(RBIntegrator):
         if self.silhouette and geometry.lathes:
             # Before the interior pass, which consumes the parameters' tangents
             outline = outline_forward(self, scene, _sensor(scene, sensor), seed, self.silhouette_spp)
-        image = super().render_forward(scene, params, sensor, seed, spp)
+        with self._attached_pass_only():
+            image = super().render_forward(scene, params, sensor, seed, spp)
         if outline is not None:
             image += mi.TensorXf(outline[..., : image.shape[2]].astype(np.float32))
         return image
@@ -170,140 +196,171 @@ class LathePRBIntegrator(RBIntegrator):
             camera = _sensor(scene, sensor)
             pieces = outline_samples(camera, differentiable_lathes(geometry.lathes))
             grad_image = np.array(grad_in)
-        super().render_backward(scene, params, grad_in, sensor, seed, spp)
+        with self._attached_pass_only():
+            super().render_backward(scene, params, grad_in, sensor, seed, spp)
         if outline:
             outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp, pieces)
 
-    @dr.syntax
     def sample(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
                δL: mi.Spectrum | None, state_in: mi.Spectrum | None, active: mi.Bool,
                **kwargs) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float], mi.Spectrum]:
-        primal = mode == dr.ADMode.Primal
-        geometry = self.geometry(scene)
-        lathes = geometry.lathes
-        check = self.normal_check
-        bsdf_ctx = mi.BSDFContext()
+        if mode != dr.ADMode.Primal:
+            return self.sample_attached(mode, scene, sampler, ray, δL, active)
+        if self._differentiating:
+            # The base class's primal pass before a differential one: its
+            # radiance would only be the state handed to that pass, which
+            # the attached pass does not read (it traces its own)
+            nothing = dr.zeros(mi.Spectrum, dr.width(ray))
+            return nothing, dr.zeros(mi.Bool, dr.width(ray)), [], nothing
+        return self.sample_primal(scene, sampler, ray, active)
 
-        ray = mi.Ray3f(dr.detach(ray))            # Current ray
-        depth = mi.UInt32(0)                      # Number of surface interactions so far
-        L = mi.Spectrum(0 if primal else state_in)  # Radiance (primal), then what is left of it
-        δL = mi.Spectrum(δL if δL is not None else 0)  # Adjoint / tangent radiance
-        β = mi.Spectrum(1)                        # Path throughput weight
-        η = mi.Float(1)                           # Product of relative IORs (Russian roulette)
-        active = mi.Bool(active)                  # Lanes whose path is still going
-        if dr.hint(self.hide_emitters, mode="scalar"):
+    @contextlib.contextmanager
+    def _attached_pass_only(self):
+        """Within: the base class's render_forward/render_backward skip
+        their primal pass (see :meth:`sample`)."""
+        self._differentiating = True
+        try:
+            yield
+        finally:
+            self._differentiating = False
+
+    def _start(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool) -> _Path:
+        """The path state of the camera ray ``ray``."""
+        active = mi.Bool(active)
+        ray = mi.Ray3f(dr.detach(ray))
+        if self.hide_emitters:
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's prb
-        si = geometry.ray_intersect(ray, active, True)  # Current (detached) interaction
-        ray_prev = mi.Ray3f(ray)                  # Ray that found the previous vertex ...
-        si_prev = dr.zeros(mi.SurfaceInteraction3f)  # ... and that vertex (detached)
-        bsdf_pdf_prev = mi.Float(1.0)             # BSDF pdf of the direction that led here
-        bsdf_delta_prev = mi.Bool(True)           # ... and whether it was a Dirac delta
         # Alpha: the camera ray met a surface, or a visible environment
         valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
+        return _Path(ray, mi.UInt32(0), mi.Spectrum(0), mi.Spectrum(1), mi.Float(1), active,
+                     dr.zeros(mi.Interaction3f), mi.Float(1), mi.Bool(True), valid_ray)
 
-        while dr.hint(active, max_iterations=self.max_depth, label=f"lathe_prb ({mode.name})"):
-            valid_ray |= active & si.is_valid() & (depth == 0)
-            si_detached = si
-            with dr.resume_grad(when=not primal):
-                if dr.hint(not primal, mode="scalar"):
-                    si = attach_lathe_hits(lathes, ray, si)
-                    si.wi = _moving_wi(lathes, ray_prev, si_prev, si, active & (depth >= 1))
+    @dr.syntax
+    def sample_primal(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
+                      active: mi.Bool) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float], mi.Spectrum]:
+        """The primal render: the paths of :meth:`sample_attached`, detached,
+        in one symbolic loop."""
+        geometry = self.geometry(scene)
+        path = self._start(scene, geometry, ray, active)  # Path state (see _Path)
+        while dr.hint(path.active, max_iterations=self.max_depth, label="lathe_prb (Primal)"):
+            path = self._vertex(scene, geometry, sampler, path, self.max_depth, False)
+        return path.L, path.valid_ray, [], path.L
 
-            # -------- Eq. 11, incident side (eq. 25: decided detached) --------
-            active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
-            cos_in_geo = dr.detach(dr.dot(si.n, -ray.d))
-            bad_in = active_next & (cos_in_geo * dr.detach(mi.Frame3f.cos_theta(si.wi)) <= 0.0)
-            if dr.hint(check == "terminate", mode="scalar"):
-                active_next &= ~bad_in
-            elif dr.hint(check == "fallback", mode="scalar"):
-                with dr.resume_grad(when=not primal):
-                    si = with_geometric_frame(si, bad_in)
+    def sample_attached(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
+                        δL: mi.Spectrum | None, active: mi.Bool
+                        ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float], mi.Spectrum]:
+        """The differential pass (docs/method.md, eqs. 28-29): the paths of
+        the primal render traced again with every lathe vertex attached to
+        the profile and every ray following the vertices that made it, so
+        that a Dirac-delta chain (glass walls, mirrors) turns and slides as
+        the profile moves. One kernel per vertex; Dr.Jit's AD graph then
+        holds every vertex for the reverse pass (memory grows with the path
+        length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
+        geometry = self.geometry(scene)
+        max_depth = min(self.max_depth, MAX_DIFFERENTIAL_DEPTH)
+        with dr.resume_grad():
+            path = self._start(scene, geometry, ray, active)
+            for _ in range(max_depth):
+                if not dr.any(path.active):
+                    break
+                path = self._vertex(scene, geometry, sampler, path, max_depth, True)
+                # Evaluated vertex by vertex: unevaluated, each vertex's
+                # kernel would recompute the whole path before it
+                sampler.schedule_state()
+                dr.eval(path)
+            L = path.L
+            if not dr.grad_enabled(L):  # no lathe seen: zero derivative
+                return mi.Spectrum(0), path.valid_ray, [], dr.detach(L)
+            if mode == dr.ADMode.Backward:
+                dr.backward_from(δL * L)
+                return mi.Spectrum(0), path.valid_ray, [], dr.detach(L)
+            return dr.forward_to(L), path.valid_ray, [], dr.detach(L)
 
-            bsdf = si.bsdf(ray)
+    def _vertex(self, scene: mi.Scene, geometry: ExactSceneGeometry, sampler: mi.Sampler, path: _Path,
+                max_depth: int, attached: bool) -> _Path:
+        """One path vertex: the hit of ``path.ray``, its emission, a light
+        sample and a BSDF sample (eq. 11 as ``normal_check`` says), the
+        next ray and Russian roulette. ``attached``: the vertex moves with
+        the profile (derivatives recorded, see :meth:`sample_attached`)."""
+        check = self.normal_check
+        ctx = mi.BSDFContext()
+        ray, depth, β, η, active = path.ray, path.depth, path.β, path.η, path.active
+        si = geometry.ray_intersect(ray, active, depth == 0)
+        if attached:
+            si = attach_lathe_hits(geometry.lathes, ray, si)
+        si_detached = dr.detach(si)
+        valid_ray = path.valid_ray | (active & si.is_valid() & (depth == 0))
 
-            # ---------------- Direct emission (BSDF-sampled) ----------------
-            ds = mi.DirectionSample3f(scene, si=si_detached, ref=si_prev)
-            mis = mis_weight(bsdf_pdf_prev, scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev))
-            show = active & (depth > 0) if self.hide_emitters else active
-            with dr.resume_grad(when=not primal):
-                Le = β * mis * ds.emitter.eval(si, show)
+        # ------------ Eq. 11, incident side (eq. 25: decided detached) ------------
+        active_next = active & si.is_valid() & (depth + 1 < max_depth)
+        cos_in_geo = dr.dot(si_detached.n, -dr.detach(ray.d))
+        bad_in = active_next & (cos_in_geo * mi.Frame3f.cos_theta(si_detached.wi) <= 0.0)
+        if check == "terminate":
+            active_next &= ~bad_in
+        elif check == "fallback":
+            si = with_geometric_frame(si, bad_in)
+            si_detached = dr.detach(si)
+        bsdf = si.bsdf(ray)
 
-            # ---------------------- Emitter sampling ----------------------
-            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            ds, em_weight = scene.sample_emitter_direction(si_detached, sampler.next_2d(), False, active_em)
-            active_em &= ds.pdf != 0.0
-            wi_sh = dr.detach(mi.Frame3f.cos_theta(si.wi))
-            if dr.hint(check != "none", mode="scalar"):
-                side_geo = dr.dot(si_detached.n, ds.d) * cos_in_geo
-                side_sh = mi.Frame3f.cos_theta(dr.detach(si.to_local(ds.d))) * wi_sh
-                active_em &= side_geo * side_sh > 0.0
-            active_em &= ~geometry.ray_test(si_detached.spawn_ray_to(ds.p), active_em)
-            with dr.resume_grad(when=not primal):
-                if dr.hint(not primal, mode="scalar"):
-                    ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
-                bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(bsdf_ctx, si, si.to_local(ds.d), active_em)
-                mis_em = dr.select(ds.delta, 1, mis_weight(ds.pdf, bsdf_pdf_em))
-                Lr_dir = dr.select(active_em, β * mis_em * bsdf_val_em * em_weight, 0)
+        # -------------------- Direct emission (BSDF-sampled) --------------------
+        ds = mi.DirectionSample3f(scene, si=si_detached, ref=path.prev)
+        pdf_em = scene.pdf_emitter_direction(path.prev, ds, ~path.bsdf_delta_prev)
+        mis = mis_weight(path.bsdf_pdf_prev, pdf_em)
+        show = active & (depth > 0) if self.hide_emitters else active
+        L = path.L + β * mis * ds.emitter.eval(si, show)
 
-            # ------------------ Detached BSDF sampling -------------------
-            si_used = dr.detach(si)  # the frame the direction is drawn in
-            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si_used, sampler.next_1d(), sampler.next_2d(),
-                                          active_next)
-            wo_world = si_used.to_world(bs.wo)
-            if dr.hint(check != "none", mode="scalar"):
-                bad_out = active_next & contradicts(si_detached, cos_in_geo, bs, wo_world)  # eq. 11, detached
-                if dr.hint(check == "fallback", mode="scalar"):
-                    bs, bsdf_weight, wo_world = _resample_geometric(bsdf, bsdf_ctx, sampler, si_used, bad_out,
-                                                                    (bs, bsdf_weight, wo_world))
-                    with dr.resume_grad(when=not primal):
-                        si = with_geometric_frame(si, bad_out)
-                else:
-                    active_next &= ~bad_out
+        # --------------------------- Emitter sampling ----------------------------
+        active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        ds, em_weight = scene.sample_emitter_direction(si_detached, sampler.next_2d(), False, active_em)
+        active_em &= ds.pdf != 0.0
+        if check != "none":
+            side_geo = dr.dot(si_detached.n, ds.d) * cos_in_geo
+            side_sh = mi.Frame3f.cos_theta(si_detached.to_local(ds.d)) * mi.Frame3f.cos_theta(si_detached.wi)
+            active_em &= side_geo * side_sh > 0.0
+        active_em &= ~geometry.ray_test(si_detached.spawn_ray_to(ds.p), active_em)
+        if attached:
+            ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
+        bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
+        mis_em = dr.select(ds.delta, 1, mis_weight(ds.pdf, dr.detach(bsdf_pdf_em)))
+        L += dr.select(active_em, β * mis_em * bsdf_val_em * em_weight, 0)
 
-            L = (L + Le + Lr_dir) if primal else (L - Le - Lr_dir)
-            ray_next = si_detached.spawn_ray(wo_world)
-            η *= bs.eta
-            β *= bsdf_weight
-            bsdf_pdf_prev = bs.pdf
-            bsdf_delta_prev = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        # ------------------ BSDF sampling (eq. 11 on the detached draw) ------------------
+        sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
+        bs, bsdf_weight = bsdf.sample(ctx, si_detached, sample_1, sample_2, active_next)
+        wo_world = si_detached.to_world(bs.wo)
+        if check != "none":
+            bad_out = active_next & contradicts(si_detached, cos_in_geo, bs, wo_world)
+            if check == "fallback":
+                # Drawn again in the geometric frame (the same call site)
+                sample_1 = dr.select(bad_out, sampler.next_1d(), sample_1)
+                sample_2 = dr.select(bad_out, sampler.next_2d(), sample_2)
+                si = with_geometric_frame(si, bad_out)
+                si_detached = dr.detach(si)
+                redrawn, weight_redrawn = bsdf.sample(ctx, si_detached, sample_1, sample_2, bad_out)
+                bs = dr.select(bad_out, redrawn, bs)
+                bsdf_weight = dr.select(bad_out, weight_redrawn, bsdf_weight)
+                wo_world = dr.select(bad_out, si_detached.to_world(bs.wo), wo_world)
+            else:
+                active_next &= ~bad_out
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        if attached:
+            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, (sample_1, sample_2),
+                                                   active_next)
+            bsdf_weight = bsdf_weight * factor
+        β = β * bsdf_weight
+        η = η * bs.eta
 
-            # ---------------------- Russian roulette ----------------------
-            β_max = dr.max(mi.unpolarized_spectrum(β))
-            active_next &= β_max != 0
-            rr_prob = dr.minimum(β_max * dr.square(η), 0.95)
-            rr_active = depth >= self.rr_depth
-            β[rr_active] *= dr.rcp(rr_prob)
-            active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
+        # ---------------------------- Russian roulette ----------------------------
+        β_max = dr.max(mi.unpolarized_spectrum(dr.detach(β)))
+        active_next &= β_max != 0
+        rr_prob = dr.minimum(β_max * dr.square(η), 0.95)
+        rr_active = depth >= self.rr_depth
+        β[rr_active] *= dr.rcp(rr_prob)
+        active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
 
-            si_next = geometry.ray_intersect(ray_next, active_next)
-
-            # ------------------ Differential phase only ------------------
-            if dr.hint(not primal, mode="scalar"):
-                with dr.resume_grad():
-                    # The reflected radiance L, re-weighted by the attached
-                    # BSDF value and solid-angle change of this vertex
-                    J = solid_angle_to_area_jacobian(si.p, si_next.p, si_next.n,
-                                                     active_next & si_next.is_valid())
-                    wo_diff = dr.select(si_next.is_valid(), dr.normalize(si_next.p - si.p), ray_next.d)
-                    wo = si.to_local(dr.replace_grad(ray_next.d, wo_diff))
-                    bsdf_val = bsdf.eval(bsdf_ctx, si, wo, active_next)
-                    Lr_ind = L * dr.relative_grad(bsdf_val) * dr.relative_grad(J)
-                    Lo = Le + Lr_dir + Lr_ind
-                    # An invisible lathe leaves Lo detached: zero derivative
-                    if dr.hint(dr.grad_enabled(Lo), mode="scalar"):
-                        if dr.hint(mode == dr.ADMode.Backward, mode="scalar"):
-                            dr.backward_from(δL * Lo)
-                        else:
-                            δL += dr.forward_to(Lo)
-
-            depth[si_detached.is_valid()] += 1
-            active = active_next
-            ray_prev = ray
-            si_prev = si_detached
-            ray = ray_next
-            si = si_next
-
-        return (L if primal else δL, valid_ray, [], L)
+        depth = dr.select(si_detached.is_valid(), depth + 1, depth)
+        return _Path(si.spawn_ray(wo_world), depth, L, β, η, active_next, mi.Interaction3f(si_detached),
+                     bs.pdf, delta, valid_ray)
 
     def to_string(self) -> str:
         depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth

@@ -214,21 +214,28 @@ class ExactSceneGeometry:
                       coherent: mi.Bool | bool = False) -> mi.SurfaceInteraction3f:
         """Nearest surface interaction along ``ray`` (``t = inf`` on a miss);
         ``coherent``: as Mitsuba's (camera rays: Embree traces the rest of
-        the scene faster)."""
+        the scene faster). The hit is found on the detached ray; where
+        ``ray`` carries derivatives (a differentiated path's moving ray),
+        the other shapes' interactions follow them (Mitsuba recomputes its
+        shapes' hits along a differentiable ray) and ``wi`` is the moving
+        ray's; lathe hits stay detached (attach them with
+        :func:`~lathe_shape.plugin.attached_hits.attach_lathe_hits`)."""
         self.follow_moves()
-        pi, si = self._rest_preliminary(ray, active, coherent)
-        won = mi.Bool(False)  # a lathe is nearer than the rest
-        for lathe in self.single:
-            ray_lathe = mi.Ray3f(ray)
-            ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
-            si_lathe = lathe.ray_intersect_exact(ray_lathe, active)
-            take = si_lathe.t < si.t
-            si, won = dr.select(take, si_lathe, si), won | take
-        for group in self.groups:
-            si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
-            take = si_group.t < si.t
-            si, won = dr.select(take, si_group, si), won | take
-        return _with_wi(dr.select(won, si, self._rest_interaction(ray, pi, active & ~won)), ray)
+        attached, ray = ray, mi.Ray3f(dr.detach(ray))
+        with dr.suspend_grad():  # the kernels' loops record no derivatives
+            pi, si = self._rest_preliminary(ray, active, coherent)
+            won = mi.Bool(False)  # a lathe is nearer than the rest
+            for lathe in self.single:
+                ray_lathe = mi.Ray3f(ray)
+                ray_lathe.maxt = dr.minimum(ray.maxt, si.t)
+                si_lathe = lathe.ray_intersect_exact(ray_lathe, active)
+                take = si_lathe.t < si.t
+                si, won = dr.select(take, si_lathe, si), won | take
+            for group in self.groups:
+                si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
+                take = si_group.t < si.t
+                si, won = dr.select(take, si_group, si), won | take
+        return _with_wi(dr.select(won, si, self._rest_interaction(attached, pi, active & ~won)), attached)
 
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
                            coherent: mi.Bool | bool = False) -> tuple[mi.SurfaceInteraction3f, LineWalk]:
@@ -349,13 +356,16 @@ class ExactSceneGeometry:
         return ray
 
     def ray_test(self, ray: mi.Ray3f, active: mi.Bool) -> mi.Bool:
-        """Is anything hit along ``ray`` before ``ray.maxt``?"""
+        """Is anything hit along ``ray`` before ``ray.maxt``? (No
+        derivatives: the kernels' loops record none.)"""
         self.follow_moves()
-        occluded = self.rest.ray_test(ray, active)
-        for lathe in self.single:
-            occluded |= lathe.ray_test_exact(ray, active & ~occluded)
-        for group in self.groups:
-            occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
+        with dr.suspend_grad():
+            ray = mi.Ray3f(dr.detach(ray))
+            occluded = self.rest.ray_test(ray, active)
+            for lathe in self.single:
+                occluded |= lathe.ray_test_exact(ray, active & ~occluded)
+            for group in self.groups:
+                occluded |= group.set.occluded(ray.o, ray.d, ray.maxt, active & ~occluded)
         return occluded
 
 
