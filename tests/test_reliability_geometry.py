@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import mitsuba as mi
 import numpy as np
+import pytest
 
 from lathe_shape.kernels.polyline import build_polyline_data, count_crossings_polyline
 from lathe_shape.plugin.line_walk import start_walk
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
+from lathe_shape.profiles import ProfileError, make_profile
 
 # ---------------------------------------------------------------------------
 # 13. Horizontal rays at a convex vertex's height cross it once
@@ -83,4 +85,39 @@ def test_horizontal_rays_near_vertex_heights_count_exactly():
     on_vertex = dict(zip((0.7, 1.0, 2.0, 2.5), count[n - 4:].tolist(), strict=True))
     assert all(c % 2 == 0 for c in on_vertex.values()), on_vertex
     assert on_vertex[2.0] == 2 and on_vertex[2.5] == 2 and on_vertex[1.0] == 2, on_vertex
+
+
+# ---------------------------------------------------------------------------
+# 14. A near-zero-length segment is named, not reported as a crossing
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("points, open_sheet", [
+    ([[0, 0], [1, 0], [1, 1], [1, 1 + 1e-12], [0, 2]], False),   # along the wall
+    ([[0, 0], [1, 0], [1, 1], [1 + 1e-12, 1], [0, 2]], False),   # across it (once a "fold")
+    ([[0, 0], [1, 0], [1, 1], [1, 1 + 1e-12], [0.5, 2]], True),  # an open sheet
+])
+def test_near_zero_segment_is_named(points, open_sheet):
+    """A 1e-12 long segment (below the touch tolerance, 1e-12 of the
+    profile's size) is refused as too short, naming the file, the point and
+    the segment's end points in full precision, not as the profile
+    intersecting itself between segments whose printed points coincide."""
+    with pytest.raises(ProfileError) as err:
+        make_profile(np.array(points, float), source="cup.xml", open_sheet=open_sheet)
+    msg = str(err.value)
+    assert "intersects itself" not in msg and "folds back" not in msg, msg
+    assert msg.startswith("cup.xml, point 4: "), msg
+    assert "too short" in msg and "1e-12 long" in msg, msg
+    assert "(1.0, 1.0) -> (" in msg and "1.000000000001" in msg, msg
+
+
+def test_near_zero_segment_names_the_lathe_parameter():
+    """Through the plugin: the shape id and the parameter."""
+    with pytest.raises(Exception, match=r"lathe 'cup': parameter 'profile', point 4: segment .* too short"):
+        mi.load_dict({"type": "scene",
+                      "cup": {"type": "lathe", "profile": "0 0, 1 0, 1 1, 1 1.000000000001, 0 2"}})
+
+
+def test_short_but_resolvable_segment_still_loads():
+    """A segment ten times the tolerance is no error."""
+    make_profile(np.array([[0, 0], [1, 0], [1, 1], [1, 1 + 2e-11], [0, 2]], float), source="cup.xml")
 

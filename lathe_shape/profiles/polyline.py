@@ -142,6 +142,7 @@ def make_profile(
     # that is not a line but encloses no area crosses itself (a bow-tie):
     # the crossing test comes before the area test to say so.
     tol = touch_tolerance(pts)
+    _check_short_segments(pts, labels, closed_loop, tol)
     if _collinear(pts, tol):
         raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
     _check_simple(pts, labels, source, tol)
@@ -176,6 +177,7 @@ def _open_profile(pts: np.ndarray, flags: np.ndarray, labels: Sequence[str], sou
         raise ProfileError(f"{source}: an open profile needs at least 2 points, got {len(pts)}")
     _check_segment_lengths(pts, labels, False)
     tol = touch_tolerance(pts)
+    _check_short_segments(pts, labels, False, tol)
     e_in, e_out = pts[1:-1] - pts[:-2], pts[2:] - pts[1:-1]
     cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
     longer = np.maximum(np.hypot(e_in[:, 0], e_in[:, 1]), np.hypot(e_out[:, 0], e_out[:, 1]))
@@ -256,6 +258,27 @@ def _check_segment_lengths(pts: np.ndarray, labels: Sequence[str], closed_loop: 
         )
 
 
+def _check_short_segments(pts: np.ndarray, labels: Sequence[str], closed_loop: bool, tol: float) -> None:
+    """No segment as short as the touch tolerance ``tol``: its two
+    neighbours would come within ``tol`` of each other, which the crossing
+    test reports as the profile intersecting itself, between segments whose
+    printed end points look alike. The short segment is named instead, with
+    its end points in full precision (issue 24, item 14)."""
+    n = len(pts)
+    nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
+    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
+    short = seg_len <= tol
+    if short.any():
+        k = int(np.argmax(short))
+        k2 = int(nxt[k])
+        a, b = pts[k], pts[k2]
+        raise ProfileError(
+            f"{labels[k2]}: segment ({_fmt_exact(a)}) -> ({_fmt_exact(b)}) is too short: "
+            f"{seg_len[k]:.3g} long, not more than the profile's touch tolerance {tol:.3g} "
+            f"(1e-12 of its size); remove the point or move it further from the previous one"
+        )
+
+
 def _canonical_chain(
     pts: np.ndarray, flags: np.ndarray, closed_loop: bool, area: float
 ) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -280,6 +303,11 @@ def _canonical_chain(
 
 def _fmt(p: np.ndarray) -> str:
     return f"{p[0]:g}, {p[1]:g}"
+
+
+def _fmt_exact(p: np.ndarray) -> str:
+    """A point in full precision (``_fmt`` rounds to 6 digits)."""
+    return f"{float(p[0])!r}, {float(p[1])!r}"
 
 
 def _signed_area(pts: np.ndarray) -> float:
