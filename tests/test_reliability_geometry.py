@@ -121,3 +121,43 @@ def test_short_but_resolvable_segment_still_loads():
     """A segment ten times the tolerance is no error."""
     make_profile(np.array([[0, 0], [1, 0], [1, 1], [1, 1 + 2e-11], [0, 2]], float), source="cup.xml")
 
+
+# ---------------------------------------------------------------------------
+# 15. A projective to_world is refused, not read as affine
+# ---------------------------------------------------------------------------
+
+_PROJECTIVE_SCENE = """<scene version="3.0.0">
+    <shape type="lathe" id="cup">
+        <string name="profile" value="0 0, 1 0, 1 1, 0 1"/>
+        <transform name="to_world">
+            <matrix value="1 0 0 0  0 1 0 0  0 0 1 0  0 0 $w 1"/>
+        </transform>
+    </shape>
+</scene>
+"""
+
+
+def test_projective_to_world_in_xml_is_refused(tmp_path):
+    """Mitsuba's XML parser drops a <matrix>'s bottom row (the lathe, like
+    any mesh, would render affine): ``load_scene`` (every command's
+    loader) refuses it, naming the file, the line, the shape and the
+    parameter; an affine bottom row (also through a define) loads."""
+    from lathe_shape.tools.scenes import SceneError, load_scene
+    path = tmp_path / "cup.xml"
+    path.write_text(_PROJECTIVE_SCENE)
+    with pytest.raises(SceneError) as err:
+        load_scene(path, {"w": "0.5"})
+    msg = str(err.value)
+    assert msg.startswith(f"{path}:5: ") and "lathe 'cup'" in msg and "'to_world'" in msg, msg
+    assert "projective" in msg and "0 0 0.5 1" in msg, msg
+    scene = load_scene(path, {"w": "0"})
+    assert np.array_equal(scene.shapes()[0].to_world_matrix, np.eye(4))
+
+
+def test_projective_to_world_in_dict_is_refused():
+    """A dict's projective transform: refused by the lathe, naming it."""
+    matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0.5, 1]]
+    for transform in (mi.ScalarTransform4f(matrix), mi.ScalarProjectiveTransform4f(matrix)):
+        with pytest.raises(Exception, match=r"lathe 'cup': parameter 'to_world'.*(affine|projective)"):
+            mi.load_dict({"type": "scene", "cup": {"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1",
+                                                   "to_world": transform}})

@@ -33,7 +33,10 @@ def transform_property(props: mi.Properties, name: str, who: str) -> np.ndarray:
     """``props[name]`` as a (4, 4) float64 matrix (identity when absent);
     it must be given as ``<transform>``."""
     value = props.get(name, mi.ScalarTransform4f())
-    if not isinstance(value, (mi.ScalarTransform4f, mi.ScalarTransform4d)):
+    # Projective ones are read too, so that check_transform can say what is wrong
+    kinds = (mi.ScalarTransform4f, mi.ScalarTransform4d, mi.ScalarProjectiveTransform4f,
+             mi.ScalarProjectiveTransform4d)
+    if not isinstance(value, kinds):
         raise ValueError(f"{who}: parameter '{name}' must be given as <transform>, got {value!r}")
     matrix = np.array(value.matrix, dtype=np.float64)
     check_transform(matrix, f"{who}: parameter '{name}'")
@@ -45,7 +48,9 @@ def check_transform(matrix: np.ndarray, who: str) -> None:
     if not np.isfinite(matrix).all():
         raise ValueError(f"{who}: the transform has non-finite entries")
     if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(f"{who}: the transform must be affine (no projection)")
+        row = " ".join(f"{x:g}" for x in matrix[3])
+        raise ValueError(f"{who}: the transform is projective (bottom row {row}); a lathe's "
+                         f"transform must be affine, with bottom row 0 0 0 1")
     linear = matrix[:3, :3]
     # Relative to the product of the column lengths (Hadamard's bound on the
     # determinant), so that a uniform scale of any size is accepted.

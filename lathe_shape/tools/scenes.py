@@ -15,6 +15,7 @@ __all__ = [
     "SceneError",
     "SceneSyntaxError",
     "blank_comments",
+    "check_affine_matrices",
     "integrator_name",
     "lathe_ids",
     "load_scene",
@@ -97,6 +98,57 @@ def _elements(data: bytes, source: str, wanted: Callable[[str, dict[str, str], s
     except expat.ExpatError as e:
         raise SceneSyntaxError(f"{source}: not a valid XML file ({e})") from None
     return found
+
+
+def check_affine_matrices(xml_text: str, source: str = "scene",
+                          defines: dict[str, str] | None = None) -> None:
+    """Refuse a ``<matrix>`` of 16 values whose bottom row is not ``0 0 0
+    1``: Mitsuba's XML parser silently drops that row (a projective
+    ``to_world`` renders as an affine one, the lathe's exact surface and
+    any mesh alike), so a projective transform is refused here, naming
+    ``source``, the line, the element it belongs to and its parameter
+    (issue 24, item 15). ``$name`` references take their ``defines``;
+    values that are not numbers then are left to Mitsuba. Text that is
+    not well-formed XML is left to Mitsuba too."""
+    data = blank_comments(xml_text.encode("utf-8"))
+    parser = expat.ParserCreate()
+    path: list[tuple[str, dict[str, str]]] = []  # the open elements, outermost first
+    found: list[str] = []
+
+    def owner() -> str:
+        for name, attributes in reversed(path):
+            if "type" in attributes and name != "transform":
+                ident = attributes.get("id")
+                return f"{attributes['type']} '{ident}'" if ident else f"a {attributes['type']} {name}"
+        return "the scene"
+
+    def start(name: str, attributes: dict[str, str]) -> None:
+        if name == "matrix" and not found:
+            text = attributes.get("value", "")
+            for key, value in (defines or {}).items():
+                text = re.sub(rf"\${re.escape(key)}(?!\w)", lambda _m, v=value: v, text)
+            try:
+                values = [float(v) for v in text.replace(",", " ").split()]
+            except ValueError:
+                values = []
+            if len(values) == 16 and values[12:] != [0.0, 0.0, 0.0, 1.0]:
+                transform = path[-1][1].get("name", "") if path and path[-1][0] == "transform" else ""
+                row = " ".join(f"{v:g}" for v in values[12:])
+                param = f" parameter '{transform}'" if transform else ""
+                found.append(f"{source}:{parser.CurrentLineNumber}: {owner()},{param}: the <matrix> "
+                             f"is projective (bottom row {row}), which Mitsuba would read as affine "
+                             f"(bottom row 0 0 0 1) without a word; only affine transforms are "
+                             f"supported")
+        path.append((name, attributes))
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = lambda name: path.pop()
+    try:
+        parser.Parse(data, True)
+    except expat.ExpatError:
+        return
+    if found:
+        raise SceneError(found[0])
 
 
 def _with_value(tag: bytes, value: int) -> bytes:
@@ -309,6 +361,7 @@ def load_scene(
     strict_error = None  # why the text could not be edited, if it could not
     try:
         edited = text if edit is None else edit(text, path)
+        check_affine_matrices(edited, path, defines)
         try:
             if resolution is not None:
                 edited = set_film_size(edited, resolution, path)
