@@ -161,3 +161,26 @@ def test_projective_to_world_in_dict_is_refused():
         with pytest.raises(Exception, match=r"lathe 'cup': parameter 'to_world'.*(affine|projective)"):
             mi.load_dict({"type": "scene", "cup": {"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1",
                                                    "to_world": transform}})
+
+
+# ---------------------------------------------------------------------------
+# 16. The POV importer refuses a singular scale, naming the line
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("scale", ["<1, 0, 1>", "0", "<0, 2, 1>"])
+def test_pov_singular_scale_is_refused_at_import(tmp_path, scale):
+    """``scale <1, 0, 1>`` (or 0, or another zero component: a singular
+    transform, which only loading the XML refused) is refused by the
+    importer, naming the file, the line of the ``scale`` and the problem; the
+    command (``lathe-profile --from-pov``) fails with that line and writes
+    no file."""
+    from lathe_shape.cli import profile as cli
+    from lathe_shape.profiles.pov import PovError, read_pov_blocks
+    path = tmp_path / "flat.pov"
+    path.write_text("lathe {\n  linear_spline 4, <0, 0>, <1, 0>, <1, 1>, <0, 1>\n"
+                    f"  translate <0, 1, 0>\n  scale {scale}\n}}\n")
+    with pytest.raises(PovError, match=rf"^{path}:4: scale <.*>: the lathe's transform becomes singular"):
+        read_pov_blocks(path)
+    out = tmp_path / "out"
+    assert cli.main(["--from-pov", str(path), "-o", str(out)]) != 0
+    assert not out.exists() or not any(out.iterdir())

@@ -221,7 +221,12 @@ def _read_modifiers(tokens: _Tokens, block: PovBlock) -> None:
             block.sturm = True
             block.notes.append("sturm: not needed (the exact kernel brackets every root)")
         elif text in ("scale", "translate", "rotate"):
-            block.transform = _transform(tokens, text) @ block.transform
+            step = _transform(tokens, text)
+            block.transform = step @ block.transform
+            if text == "scale" and _singular(block.transform):
+                raise tokens.error(f"scale {_fmt_scale(step)}: the {block.object}'s "
+                                   f"transform becomes singular (a zero or vanishing scale "
+                                   f"component flattens the shape; Mitsuba cannot load it)", line)
         elif text == ",":
             continue
         else:
@@ -244,6 +249,22 @@ def _skip_statement(tokens: _Tokens) -> None:
                 return
     while tokens.peek()[0] in ("number", "symbol", "string") and tokens.peek()[1] not in "{}":
         tokens.take()
+
+
+def _singular(m: np.ndarray) -> bool:
+    """Whether the linear part of ``m`` is singular or too nearly so for a
+    lathe's ``to_world``: the test of ``plugin.params.check_transform``
+    (determinant relative to the product of the column lengths), so that
+    what is written here loads."""
+    linear = m[:3, :3]
+    if not np.isfinite(linear).all():
+        return True
+    return abs(np.linalg.det(linear)) <= 1e-9 * float(np.prod(np.linalg.norm(linear, axis=0)))
+
+
+def _fmt_scale(m: np.ndarray) -> str:
+    """The factors of the scale matrix ``m``, ``<x, y, z>``."""
+    return "<" + ", ".join(f"{v:g}" for v in np.diag(m)[:3]) + ">"
 
 
 def _transform(tokens: _Tokens, op: str) -> np.ndarray:
