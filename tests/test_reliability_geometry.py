@@ -184,3 +184,56 @@ def test_pov_singular_scale_is_refused_at_import(tmp_path, scale):
     out = tmp_path / "out"
     assert cli.main(["--from-pov", str(path), "-o", str(out)]) != 0
     assert not out.exists() or not any(out.iterdir())
+
+
+# ---------------------------------------------------------------------------
+# 10. Scales beyond 1e+-12: traced, or refused with the supported range
+# ---------------------------------------------------------------------------
+
+def _exact_and_mesh_t(profile_size: float, scale: float) -> tuple[float, float, float]:
+    """A ray at a cylinder of ``profile_size`` under ``scale(scale)``: its
+    exact hit ``t`` and the mesh's, both per world size, and the exact
+    normal's y."""
+    p = profile_size
+    lathe = {"type": "lathe", "profile": f"0 0, {p} 0, {p} {p}, 0 {p}", "mesh_segments": 64,
+             "to_world": mi.ScalarTransform4f().scale(scale)}
+    shape = mi.load_dict(lathe)
+    size = profile_size * scale
+    ray = mi.Ray3f(mi.Point3f(0.3 * size, -5 * size, 0.5 * size), mi.Vector3f(0, 1, 0))
+    si = shape.ray_intersect_exact(ray)
+    mesh = mi.load_dict({"type": "scene", "lathe": lathe}).ray_intersect(ray)
+    return float(si.t[0]) / size, float(mesh.t[0]) / size, float(si.n.y[0])
+
+
+@pytest.mark.parametrize("profile_size, scale", [(1.0, 1e-13), (1e-15, 1e15), (1.0, 1e-20),
+                                                 (1e10, 1e-25), (1.0, 1e20)])
+def test_scales_beyond_1e12_are_traced_exactly(profile_size, scale):
+    """The transform's inverse, once float32's (the cube of the scale in its
+    determinant over- or underflowed beyond 1e+-12: t = inf while the mesh
+    rendered), is exact: the hit at 5 - sqrt(1 - 0.3^2) world sizes, with a
+    unit normal, where the mesh too hits it (where Mitsuba traces the mesh)."""
+    t, t_mesh, n_y = _exact_and_mesh_t(profile_size, scale)
+    expected = 5.0 - np.sqrt(1.0 - 0.09)
+    assert abs(t - expected) < 1e-5 and abs(n_y + np.sqrt(1.0 - 0.09)) < 1e-5, (t, n_y)
+    if np.isfinite(t_mesh):
+        assert abs(t_mesh - t) < 2e-3
+
+
+@pytest.mark.parametrize("profile_size, scale", [(1.0, 1e-31), (1.0, 1e31), (1e-25, 1e-15), (1e17, 1e17)])
+def test_untraceable_scale_is_refused_with_the_range(profile_size, scale):
+    """Scale factors or world sizes float32 cannot trace (the exact lathe
+    vanished or its normals were inf) are refused: the message names the
+    lathe, the parameter and the supported range."""
+    p = profile_size
+    with pytest.raises(Exception, match=r"lathe 'tiny': parameter 'to_world': the lathe's "
+                                        r"(scale factor|world size).*1e-30 \.\. 1e\+30"):
+        mi.load_dict({"type": "scene", "tiny": {
+            "type": "lathe", "profile": f"0 0, {p} 0, {p} {p}, 0 {p}", "mesh_segments": 16,
+            "to_world": mi.ScalarTransform4f().scale(scale)}})
+
+
+def test_set_to_world_refuses_untraceable_scale():
+    """``set_to_world`` checks the same range."""
+    shape = mi.load_dict({"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1", "mesh_segments": 16})
+    with pytest.raises(ValueError, match=r"set_to_world: the lathe's scale factor 1e-32 .*1e-30 \.\. 1e\+30"):
+        shape.set_to_world(np.diag([1e-32, 1e-32, 1e-32, 1.0]))

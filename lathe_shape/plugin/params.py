@@ -6,7 +6,16 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["check_transform", "describe_lathe", "transform_property", "typed_property"]
+__all__ = ["TRACEABLE_SCALES", "check_traceable_scale", "check_transform", "describe_lathe",
+           "transform_property", "typed_property"]
+
+#: Range of a lathe's transform scale factors, and of its size in the world
+#: (profile size times scale), that the float32 exact kernels trace: beyond
+#: it world positions, ray parameters or the local frame's directions
+#: under- or overflow float32 (measured: hits fail from about 1e-38 and
+#: 1e+35 on; issue 24, item 10). Mitsuba's own mesh intersection is
+#: narrower (the reference mesh misses from about 1e-20 and 1e+13 on).
+TRACEABLE_SCALES = (1e-30, 1e30)
 
 
 def describe_lathe(props: mi.Properties) -> str:
@@ -56,3 +65,20 @@ def check_transform(matrix: np.ndarray, who: str) -> None:
     # determinant), so that a uniform scale of any size is accepted.
     if abs(np.linalg.det(linear)) <= 1e-9 * float(np.prod(np.linalg.norm(linear, axis=0))):
         raise ValueError(f"{who}: the transform is singular (a zero scale?)")
+
+
+def check_traceable_scale(matrix: np.ndarray, size: float, who: str) -> None:
+    """The transform's scale factors (singular values of its linear part)
+    and the lathe's world size (``size``, the profile's local extent, times
+    them) within :data:`TRACEABLE_SCALES`; a ValueError names ``who`` and
+    the supported range otherwise."""
+    lo, hi = TRACEABLE_SCALES
+    factors = np.linalg.svd(matrix[:3, :3], compute_uv=False)
+    small, large = float(factors.min()), float(factors.max())
+    for what, value in (("scale factor", small), ("scale factor", large),
+                        ("world size (profile size times scale)", size * small),
+                        ("world size (profile size times scale)", size * large)):
+        if not lo <= value <= hi:
+            raise ValueError(f"{who}: the lathe's {what} {value:.3g} is outside the range the float32 "
+                             f"exact kernels can trace ({lo:g} .. {hi:g}; the profile's size is "
+                             f"{size:.3g}, the transform's scale factors {small:.3g} .. {large:.3g})")

@@ -92,7 +92,13 @@ from ..kernels.common import LatheGeometry
 from ..profiles import ProfileError, parse_profile_string, read_points, read_profile_options
 from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
 from .interaction import lathe_interaction
-from .params import check_transform, describe_lathe, transform_property, typed_property
+from .params import (
+    check_traceable_scale,
+    check_transform,
+    describe_lathe,
+    transform_property,
+    typed_property,
+)
 from .profile_param import ProfileIndex, profile_index, rebuild_surface, remember_input
 from .reference_mesh import check_mesh_budget, reference_steps
 from .variants import register_jit_plugin
@@ -200,6 +206,7 @@ class LatheShape(mi.Mesh):
         check_mesh_budget(_ring_bound(self.surface), steps, who)
         #: The reference tessellation in the local frame.
         self.local_mesh = self.surface.tessellate(steps)
+        check_traceable_scale(self.to_world_matrix, self._local_size(), f"{who}: parameter 'to_world'")
 
         super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
                          len(self.local_mesh.faces), props, has_vertex_normals=True,
@@ -212,6 +219,11 @@ class LatheShape(mi.Mesh):
         self.add_attribute(FACE_BAND_ATTRIBUTE, 1, mi.Float(self.local_mesh.face_band.astype(np.float32)))
         self._set_transform(self.to_world_matrix)
         self._warn_open_dielectric(who)
+
+    def _local_size(self) -> float:
+        """The reference mesh's largest extent in the local frame."""
+        positions = self.local_mesh.positions
+        return float(np.ptp(positions, axis=0).max())
 
     def _warn_open_dielectric(self, who: str) -> None:
         """An open sheet has no inside: a dielectric (which refracts into
@@ -230,8 +242,17 @@ class LatheShape(mi.Mesh):
 
     def _set_transform(self, matrix: np.ndarray) -> None:
         self.to_world_matrix = np.array(matrix, dtype=np.float64)
-        self._to_world = mi.Transform4f(self.to_world_matrix.astype(np.float32))
-        self._to_local = self._to_world.inverse()
+        # Inverses in float64: float32's (from the 4x4 determinant, the cube
+        # of the scale) overflow beyond scales of about 1e+-12, and the exact
+        # surface then vanished (issue 24, item 10). The normals' matrix (the
+        # inverse transpose) is divided by its largest entry: normals are
+        # normalized after it, and unscaled they under- or overflow there.
+        to_local = np.linalg.inv(self.to_world_matrix)
+        normals = to_local.T / np.abs(to_local[:3, :3]).max()
+        self._to_world = mi.Transform4f(mi.Matrix4f(self.to_world_matrix.astype(np.float32)),
+                                        mi.Matrix4f(normals.astype(np.float32)))
+        self._to_local = mi.Transform4f(mi.Matrix4f(to_local.astype(np.float32)),
+                                        mi.Matrix4f(self.to_world_matrix.T.astype(np.float32)))
         # Opaque: a new transform is a new kernel input, not a recompile.
         dr.make_opaque(self._to_world, self._to_local)
 
@@ -268,6 +289,7 @@ class LatheShape(mi.Mesh):
         if matrix.shape != (4, 4):
             raise ValueError(f"{who} needs a 4x4 matrix, got shape {matrix.shape}")
         check_transform(matrix, who)
+        check_traceable_scale(matrix, self._local_size(), who)
         if np.linalg.det(matrix[:3, :3]) * np.linalg.det(self.to_world_matrix[:3, :3]) < 0.0:
             # The mesh's face winding was fixed for the original handedness.
             raise ValueError(f"{who}: the new transform mirrors the shape relative to the old one")
