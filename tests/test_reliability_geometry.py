@@ -237,3 +237,47 @@ def test_set_to_world_refuses_untraceable_scale():
     shape = mi.load_dict({"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1", "mesh_segments": 16})
     with pytest.raises(ValueError, match=r"set_to_world: the lathe's scale factor 1e-32 .*1e-30 \.\. 1e\+30"):
         shape.set_to_world(np.diag([1e-32, 1e-32, 1e-32, 1.0]))
+
+
+# ---------------------------------------------------------------------------
+# 9. An emitting lathe with reference="proxy" warns
+# ---------------------------------------------------------------------------
+
+def _logged_warnings(make) -> list[str]:
+    """Mitsuba's log lines while ``make()`` runs."""
+    logged: list[str] = []
+
+    class Appender(mi.Appender):
+        def append(self, level, text):
+            if level == mi.LogLevel.Warn:
+                logged.append(text)
+
+        def log_progress(self, *args):
+            pass
+
+    logger, appender = mi.logger(), Appender()
+    logger.add_appender(appender)
+    try:
+        make()
+    finally:
+        logger.remove_appender(appender)
+    return logged
+
+
+def test_emitting_proxy_lathe_warns():
+    """Mitsuba samples an emitter's points on the reference mesh, a 12-sided
+    polygon with ``reference="proxy"``: its light comes out dimmer and the
+    lamp looks faceted. The lathe warns, naming itself; an emitting lathe
+    with the full mesh, and a proxy that emits nothing, do not."""
+    def lamp(reference: str, emits: bool) -> None:
+        lathe = {"type": "lathe", "profile": "0 0, 1 0, 1 1, 0 1", "reference": reference}
+        if emits:
+            lathe["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}
+        mi.load_dict({"type": "scene", "lamp": lathe})
+
+    warnings = _logged_warnings(lambda: lamp("proxy", True))
+    assert len(warnings) == 1, warnings
+    assert "lathe 'lamp'" in warnings[0] and "reference" in warnings[0] and "proxy" in warnings[0]
+    assert "12" in warnings[0] and "emitter" in warnings[0], warnings[0]
+    assert _logged_warnings(lambda: lamp("mesh", True)) == []
+    assert _logged_warnings(lambda: lamp("proxy", False)) == []

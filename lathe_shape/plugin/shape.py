@@ -219,11 +219,25 @@ class LatheShape(mi.Mesh):
         self.add_attribute(FACE_BAND_ATTRIBUTE, 1, mi.Float(self.local_mesh.face_band.astype(np.float32)))
         self._set_transform(self.to_world_matrix)
         self._warn_open_dielectric(who)
+        self._warn_emitting_proxy(who)
 
     def _local_size(self) -> float:
         """The reference mesh's largest extent in the local frame."""
         positions = self.local_mesh.positions
         return float(np.ptp(positions, axis=0).max())
+
+    def _warn_emitting_proxy(self, who: str) -> None:
+        """Mitsuba samples an area emitter's points on the reference mesh and
+        every integrator sees the lamp there: with ``reference="proxy"`` that
+        is the coarse proxy, so the light is dimmer (the polygon's area) and
+        the visible lamp faceted (issue 24, item 9)."""
+        if self.reference == "proxy" and self.emitter() is not None:
+            mi.Log(mi.LogLevel.Warn,
+                   f"{who}: an emitter on a lathe with parameter 'reference' = 'proxy': Mitsuba "
+                   f"samples and shows the emitter on the {self.mesh_segments}-sided proxy mesh, so "
+                   f"its light comes out dimmer (the polygons' smaller area) and "
+                   f"the lamp looks faceted; use reference 'mesh' with a fine mesh_segments for "
+                   f"an emitting lathe")
 
     def _warn_open_dielectric(self, who: str) -> None:
         """An open sheet has no inside: a dielectric (which refracts into
