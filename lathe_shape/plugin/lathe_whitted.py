@@ -38,18 +38,26 @@
        on through the area emitters they meet first, and the environment
        seen directly is black with alpha 0. (Default: false)
 
-The ray tree. Every camera ray starts a deterministic binary tree:
+The ray tree. Every camera ray starts a binary tree, deterministic but for
+mixed BSDFs (below):
 
 * at a vertex whose BSDF has Dirac delta lobes (``dielectric``,
-  ``thindielectric``, ``conductor``, the specular coat of ``plastic``) the
-  reflected and the transmitted branches are both traced, each weighted by
-  its lobe's weight. The weights are the BSDF's own: :meth:`mi.BSDF.sample`
-  is called once with ``BSDFContext.type_mask`` set to the delta reflection
-  and once to the delta transmission (or null) lobe, so that the BSDF picks
-  that lobe with probability 1 and returns its Fresnel reflectance R or
-  transmittance T (times the radiance scaling 1/eta^2 and the BSDF's
-  ``specular_reflectance``/``specular_transmittance``). Nothing is random,
-  so the specular chains have no noise;
+  ``thindielectric``, ``conductor``, the specular coat of ``plastic``, the
+  null lobe of ``mask`` and ``null``) the reflected and the transmitted
+  branches are both traced, each weighted by its lobe's weight. The weights
+  are the BSDF's own: :meth:`mi.BSDF.sample` is called once with
+  ``BSDFContext.type_mask`` set to the delta reflection lobe and once to the
+  delta transmission (or null) lobe, and a branch is kept only where the
+  lobe sampled is the one asked for (:func:`sample_lobe`). A single
+  BSDF then picks that lobe with probability 1 and returns its Fresnel
+  reflectance R or transmittance T (times the radiance scaling 1/eta^2 and
+  the BSDF's ``specular_reflectance``/``specular_transmittance``): nothing
+  is random, so the specular chains have no noise. A BSDF that mixes
+  others (``blendbsdf``, ``mask``) picks one of its parts at random with
+  that part's own probability (its blend weight or opacity), as in
+  Mitsuba's ``path``, so that the branch has the mixture's weight on
+  average: such surfaces are noisy, but conserve energy (a white furnace
+  renders 1);
 * at a vertex whose BSDF has smooth (diffuse or glossy) lobes, direct light
   is gathered from every emitter of the scene (point, spot, directional,
   area, constant and environment emitters; ``Emitter.sample_direction``,
@@ -137,6 +145,31 @@ def lobe_context(lobe: mi.BSDFFlags, mode: mi.TransportMode = mi.TransportMode.R
     return ctx
 
 
+def sample_lobe(bsdf: mi.BSDF, si: mi.SurfaceInteraction3f, lobe: mi.BSDFFlags, sample1: mi.Float,
+                active: mi.Bool, mode: mi.TransportMode = mi.TransportMode.Radiance,
+                ) -> tuple[mi.BSDFSample3f, mi.Spectrum, mi.Bool]:
+    """Sample the delta ``lobe`` (:data:`REFLECTION` or
+    :data:`TRANSMISSION`) of ``bsdf``: the sample, its weight and where it
+    exists. A sample counts only where its type is in ``lobe``: a BSDF made
+    of others (``mask``, ``blendbsdf``) picks a part with ``sample1`` and
+    its own probability for it, and may pick one without the lobe (then
+    nothing is sampled: the branch's weight is the part's on average).
+    ``mask`` asked for a delta reflection alone samples its null lobe, with
+    weight 1 (Mitsuba 3.9): there the reflection is sampled again with the
+    null lobe enabled too, so that the mask picks its nested BSDF with
+    probability ``opacity``. (Not everywhere: ``thindielectric`` would then
+    pick its reflection at random.) Delta lobes ignore the 2D sample."""
+    bs, weight = bsdf.sample(lobe_context(lobe, mode), si, sample1, mi.Point2f(0.5), active)
+    if not lobe & mi.BSDFFlags.Null:
+        redo = active & ((bs.sampled_type & int(mi.BSDFFlags.Null)) != 0)
+        bs_redo, weight_redo = bsdf.sample(lobe_context(lobe | mi.BSDFFlags.Null, mode), si, sample1,
+                                           mi.Point2f(0.5), redo)
+        bs = dr.select(redo, bs_redo, bs)
+        weight = dr.select(redo, weight_redo, weight)
+    exists = active & (bs.pdf > 0.0) & (dr.max(weight) > 0.0) & ((bs.sampled_type & int(lobe)) != 0)
+    return bs, weight, exists
+
+
 class LatheWhittedIntegrator(mi.SamplingIntegrator):
     """Whitted ray tracer that renders every ``lathe`` shape exactly (see
     the module docstring for the parameters)."""
@@ -221,8 +254,11 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             L += weight * self.direct_light(scene, geometry, sampler, si, bsdf, cos_in_geo, smooth)
 
             # ---------- The two specular branches, each with its weight ----------
-            wo_r, weight_r, go_r = self.specular_branch(bsdf, si, REFLECTION, cos_in_geo, vertex)
-            wo_t, weight_t, go_t = self.specular_branch(bsdf, si, TRANSMISSION, cos_in_geo, vertex)
+            # (The random numbers only choose among the parts of a mixture.)
+            wo_r, weight_r, go_r = self.specular_branch(bsdf, si, REFLECTION, sampler.next_1d(),
+                                                        cos_in_geo, vertex)
+            wo_t, weight_t, go_t = self.specular_branch(bsdf, si, TRANSMISSION, sampler.next_1d(),
+                                                        cos_in_geo, vertex)
             weight_r *= weight
             weight_t *= weight
             go_r &= dr.max(weight_r) >= self.cutoff
@@ -260,16 +296,15 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         return si, vertex, cos_in_geo
 
     def specular_branch(self, bsdf: mi.BSDF, si: mi.SurfaceInteraction3f, lobe: mi.BSDFFlags,
-                        cos_in_geo: mi.Float, active: mi.Bool) -> tuple[mi.Vector3f, mi.Spectrum, mi.Bool]:
+                        sample1: mi.Float, cos_in_geo: mi.Float,
+                        active: mi.Bool) -> tuple[mi.Vector3f, mi.Spectrum, mi.Bool]:
         """The branch of the delta ``lobe`` (reflection or transmission) at
-        ``si``: world direction, weight and whether it exists. Under
+        ``si``: world direction, weight and whether it exists (the lobe
+        sampled is ``lobe``: see :func:`sample_lobe`). Under
         ``normal_check`` a reflection must stay on the incident side of the
         real surface and a transmission must cross it (eq. 11); ``fallback``
         redoes a contradicting branch with the geometric normal."""
-        ctx = lobe_context(lobe)
-        sample2 = mi.Point2f(0.5)  # unused by delta lobes, which are deterministic
-        bs, lobe_weight = bsdf.sample(ctx, si, 0.5, sample2, active)
-        exists = active & (bs.pdf > 0.0) & (dr.max(lobe_weight) > 0.0)
+        bs, lobe_weight, exists = sample_lobe(bsdf, si, lobe, sample1, active)
         wo = si.to_world(bs.wo)
         if self.normal_check == "none":
             return wo, lobe_weight, exists
@@ -278,10 +313,10 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         if self.normal_check == "terminate":
             return wo, lobe_weight, exists & ~bad
         si_geo = with_geometric_frame(si, bad)
-        bs_geo, weight_geo = bsdf.sample(ctx, si_geo, 0.5, sample2, bad)
+        bs_geo, weight_geo, exists_geo = sample_lobe(bsdf, si_geo, lobe, sample1, bad)
         wo = dr.select(bad, si_geo.to_world(bs_geo.wo), wo)
         lobe_weight = dr.select(bad, weight_geo, lobe_weight)
-        exists &= ~bad | ((bs_geo.pdf > 0.0) & (dr.max(weight_geo) > 0.0))
+        exists &= ~bad | exists_geo
         return wo, lobe_weight, exists
 
     @dr.syntax
@@ -307,31 +342,33 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                 side_geo = dr.dot(si.n, ds.d) * cos_in_geo
                 side_sh = mi.Frame3f.cos_theta(si.to_local(ds.d)) * mi.Frame3f.cos_theta(si.wi)
                 lit &= side_geo * side_sh > 0.0
-            visibility = self.visibility(geometry, si, ds.p, lit)
+            visibility = self.visibility(geometry, sampler, si, ds.p, lit)
             bsdf_value = bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), lit)
             reflected += dr.select(lit, bsdf_value * emitter_weight * visibility, 0.0)
             index += 1
         return reflected
 
-    def visibility(self, geometry: ExactSceneGeometry, si: mi.SurfaceInteraction3f, target: mi.Point3f,
-                   active: mi.Bool) -> mi.Spectrum:
+    def visibility(self, geometry: ExactSceneGeometry, sampler: mi.Sampler, si: mi.SurfaceInteraction3f,
+                   target: mi.Point3f, active: mi.Bool) -> mi.Spectrum:
         """How much light passes from ``target`` to ``si`` (``shadows``)."""
         if self.shadows == "filtered":
-            return self.filtered_visibility(geometry, si, target, active)
+            return self.filtered_visibility(geometry, sampler, si, target, active)
         occluded = geometry.ray_test(si.spawn_ray_to(target), active)
         return dr.select(occluded, mi.Spectrum(0.0), mi.Spectrum(1.0))
 
     @dr.syntax
-    def filtered_visibility(self, geometry: ExactSceneGeometry, si: mi.SurfaceInteraction3f,
-                            target: mi.Point3f, active: mi.Bool) -> mi.Spectrum:
+    def filtered_visibility(self, geometry: ExactSceneGeometry, sampler: mi.Sampler,
+                            si: mi.SurfaceInteraction3f, target: mi.Point3f,
+                            active: mi.Bool) -> mi.Spectrum:
         """Transmittance of the straight segment from ``si`` to ``target``
         (``shadows`` = ``filtered``): the product of the delta (or null)
         transmission weights of the surfaces crossed, each taken for light
         arriving from the outside at that angle, in importance mode so that
-        no 1/eta^2 radiance scaling enters; 0 behind any other surface. The
-        segment walks its line through the lathes (line_walk.py): no
-        crossing skipped or counted twice."""
-        ctx = lobe_context(TRANSMISSION, mi.TransportMode.Importance)
+        no 1/eta^2 radiance scaling enters; 0 behind any other surface (a
+        mixture such as ``mask`` lets light through with its transmitting
+        part's probability: :func:`sample_lobe`). The segment walks its
+        line through the lathes (line_walk.py): no crossing skipped or
+        counted twice."""
         origin = mi.Interaction3f(si)        # Where the segment starts (last surface crossed)
         transmittance = mi.Spectrum(1.0)     # Product of the crossings' transmittances
         crossings = mi.UInt32(0)             # Surfaces crossed so far
@@ -349,8 +386,9 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
             # so total internal reflection on the way out would be an
             # artifact of the straight line.
             hit.wi = mi.Vector3f(hit.wi.x, hit.wi.y, dr.abs(hit.wi.z))
-            bs, crossing = hit.bsdf(segment).sample(ctx, hit, 0.5, mi.Point2f(0.5), active)
-            transmittance[active] *= dr.select(bs.pdf > 0.0, crossing, 0.0)
+            _, crossing, crossed = sample_lobe(hit.bsdf(segment), hit, TRANSMISSION, sampler.next_1d(),
+                                               active, mi.TransportMode.Importance)
+            transmittance[active] *= dr.select(crossed, crossing, 0.0)
             crossings[active] += 1
             blocked = active & (crossings >= MAX_SHADOW_CROSSINGS)
             transmittance[blocked] = 0.0
