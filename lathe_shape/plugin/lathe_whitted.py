@@ -11,7 +11,9 @@
      - Most surface interactions along one branch of the ray tree, >= 0.
        1 renders only directly visible emitters, 2 adds direct light at the
        first surface, 3 one specular bounce before it, and so on (as
-       ``lathe_path`` counts). (Default: 10)
+       ``lathe_path`` counts). A deep tree costs only where its branches
+       stay above ``cutoff`` (total internal reflection): the kernel and
+       the stack of pending branches do not grow with it. (Default: 10)
    * - ``cutoff``
      - float
      - A branch whose throughput (largest channel, the product of the
@@ -39,7 +41,7 @@
        seen directly is black with alpha 0. (Default: false)
 
 The ray tree. Every camera ray starts a binary tree, deterministic but for
-mixed BSDFs (below):
+mixed BSDFs and a full stack (both below):
 
 * at a vertex whose BSDF has Dirac delta lobes (``dielectric``,
   ``thindielectric``, ``conductor``, the specular coat of ``plastic``, the
@@ -70,9 +72,17 @@ mixed BSDFs (below):
 
 The tree is traversed depth first inside one symbolic loop: where a vertex
 spawns two branches the reflected one is pushed onto a small per-lane stack
-(``max_depth - 1`` entries held in registers) and the transmitted one is
-followed; a branch that ends pops the next. No Python runs per ray, and
-lanes only wait for the others of their SIMD packet (LLVM) or warp (CUDA).
+(``min(max_depth - 1, MAX_PENDING)`` entries held in registers) and the
+transmitted one is followed; a branch that ends pops the next. Where the
+stack is full, only one of the two branches goes on, picked at random with
+probability proportional to its weight, and its weight is divided by that
+probability (as a path tracer picks a lobe): the image stays unbiased and
+the cost of a render no longer grows with ``max_depth`` (a stack as deep as
+``max_depth`` made the kernel's size and each step's work grow with it).
+Branches below ``cutoff`` are not traced, so that a deep ``max_depth``
+only costs where light really bounces that often (total internal
+reflection). No Python runs per ray, and lanes only wait for the others of
+their SIMD packet (LLVM) or warp (CUDA).
 
 Every ``lathe`` is intersected exactly (see
 :mod:`lathe_shape.plugin.scene_geometry`); all other shapes, BSDFs and
@@ -105,6 +115,10 @@ MAX_SHADOW_CROSSINGS = 16
 #: The delta lobes that spawn the two branches of the ray tree.
 REFLECTION = mi.BSDFFlags.DeltaReflection
 TRANSMISSION = mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.Null
+
+#: Most branches waiting on a lane's stack; where it is full, a vertex with
+#: two branches follows one of them at random (see the module docstring).
+MAX_PENDING = 16
 
 
 class PendingBranch:
@@ -225,7 +239,7 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         weight = mi.Spectrum(1.0)            # Its throughput (Fresnel and BSDF weights so far)
         depth = mi.UInt32(0)                 # Its number of surface interactions so far
         pending = mi.UInt32(0)               # Branches waiting on this lane's stack ...
-        stack = [PendingBranch() for _ in range(max(self.max_depth - 1, 1))]  # ... top first
+        stack = [PendingBranch() for _ in range(self.stack_size())]  # ... top first
         L = mi.Spectrum(0.0)                 # Radiance gathered by the whole tree
         active = mi.Bool(active) & (self.max_depth > 0)  # Lanes with a branch to trace
         # Alpha: the camera ray saw a surface, or a visible environment
@@ -261,8 +275,18 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                                                         cos_in_geo, vertex)
             weight_r *= weight
             weight_t *= weight
-            go_r &= dr.max(weight_r) >= self.cutoff
-            go_t &= dr.max(weight_t) >= self.cutoff
+            go_r &= (dr.max(weight_r) >= self.cutoff) & (dr.max(weight_r) > 0.0)
+            go_t &= (dr.max(weight_t) >= self.cutoff) & (dr.max(weight_t) > 0.0)
+
+            # Full stack: one of the two branches, picked in proportion to
+            # its weight, carries the weight of both on average.
+            pick = go_r & go_t & (pending >= len(stack))
+            share_r = dr.max(weight_r) / (dr.max(weight_r) + dr.max(weight_t))
+            pick_r = pick & (sampler.next_1d() < share_r)
+            weight_r[pick_r] /= share_r
+            weight_t[pick & ~pick_r] /= 1.0 - share_r
+            go_r &= ~pick | pick_r
+            go_t &= ~pick_r
 
             # ------- Next branch: a child here, else the top of the stack -------
             # Both children: push the reflection, follow the transmission.
@@ -281,6 +305,11 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
 
         # A hidden environment seen directly, or only through null surfaces, is black
         return dr.select(valid_ray, L, 0.0), valid_ray, []
+
+    def stack_size(self) -> int:
+        """Entries of a lane's stack of pending branches: a branch at depth
+        d can leave at most d pending, and never more than MAX_PENDING."""
+        return max(min(self.max_depth - 1, MAX_PENDING), 1)
 
     def incident_check(self, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
                        vertex: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Bool, mi.Float]:
