@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 
 import drjit as dr
 import mitsuba as mi
@@ -182,11 +183,57 @@ def _ring_bound(surface: PolylineSurface | BSplineSurface) -> int:
     return 2 * surface.profile.segment_count
 
 
+#: Per thread: the depth of nested lathe constructors and the lathes whose
+#: mesh the outermost one still has to write (see :func:`_constructing`).
+_CONSTRUCTION = threading.local()
+
+
+@contextlib.contextmanager
+def _constructing():
+    """Count a lathe constructor on this thread; yields whether it is the
+    outermost.
+
+    Mitsuba's parallel loader (the default of ``mi.load_file`` and
+    ``mi.load_dict``) runs plugin constructors as tasks of Dr.Jit's thread
+    pool, and a thread that waits for the pool (as writing a mesh does:
+    ``params.update()`` evaluates, and Mitsuba's ``Mesh.parameters_changed``
+    reads the vertices back) runs other pending tasks meanwhile: another
+    lathe's constructor, nested on the same stack, which waits in turn.
+    With thousands of lathes the nesting reached Python's recursion limit
+    (issue 24, item 5). So a nested constructor only queues its lathe, and
+    the outermost one writes the queued meshes, in a loop, before it
+    returns: constructors nest at most two deep. Every lathe's mesh is
+    written before the loader's scene (which waits for every shape) is
+    built."""
+    depth = getattr(_CONSTRUCTION, "depth", 0)
+    if depth == 0:
+        _CONSTRUCTION.pending = []
+    _CONSTRUCTION.depth = depth + 1
+    try:
+        yield depth == 0
+    finally:
+        _CONSTRUCTION.depth = depth
+        if depth == 0:
+            _CONSTRUCTION.pending = []
+
+
+def _finish_pending() -> None:
+    """Write the meshes of the lathes queued on this thread (those queued
+    meanwhile too)."""
+    pending = _CONSTRUCTION.pending
+    while pending:
+        pending.pop(0)._finish_mesh()
+
+
 class LatheShape(mi.Mesh):
     """A solid of revolution: reference mesh for stock integrators, exact
     intersection through :meth:`ray_intersect_exact` (see module docstring)."""
 
     def __init__(self, props: mi.Properties) -> None:
+        with _constructing() as outermost:
+            self._construct(props, outermost)
+
+    def _construct(self, props: mi.Properties, outermost: bool) -> None:
         who = describe_lathe(props)
         steps = typed_property(props, "mesh_segments", int, 256, who)
         if steps < 3:
@@ -211,15 +258,23 @@ class LatheShape(mi.Mesh):
         super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
                          len(self.local_mesh.faces), props, has_vertex_normals=True,
                          has_vertex_texcoords=True)
+        # Written by the outermost lathe constructor of this thread (see
+        # _constructing): a nested one returns at once
+        _CONSTRUCTION.pending.append(self)
+        if outermost:
+            _finish_pending()
+        self._set_transform(self.to_world_matrix)
+        self._warn_open_dielectric(who)
+        self._warn_emitting_proxy(who)
+
+    def _finish_mesh(self) -> None:
+        """Write the reference mesh and its face attribute."""
         self._write_mesh(self._mesh_buffers(self.to_world_matrix))
         # A mesh attribute makes Mitsuba's scene optimizer (the default
         # optimize=True of mi.load_file, and mi.load_dict with a shared BSDF)
         # leave this mesh alone: it merges only meshes without attributes, and
         # a merged lathe would lose its exact surface without a word.
         self.add_attribute(FACE_BAND_ATTRIBUTE, 1, mi.Float(self.local_mesh.face_band.astype(np.float32)))
-        self._set_transform(self.to_world_matrix)
-        self._warn_open_dielectric(who)
-        self._warn_emitting_proxy(who)
 
     def _local_size(self) -> float:
         """The reference mesh's largest extent in the local frame."""
