@@ -79,6 +79,10 @@ __all__ = ["LathePRBIntegrator", "register"]
 #: for the reverse pass; ``max_depth = -1`` means this).
 MAX_DIFFERENTIAL_DEPTH = 64
 
+#: Cosine (incident or outgoing, with the shading normal) below which a Dirac
+#: delta vertex's direction and weight are differentiated no more (eq. 30).
+GRAZING_COSINE = 0.1
+
 
 def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
@@ -117,10 +121,14 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     attached BSDF value."""
     delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
     bs_att, weight_att = bsdf.sample(ctx, si, samples[0], samples[1], active & delta)
-    wo_world = dr.select(delta, si.to_world(bs_att.wo), wo_world)
+    # Near grazing (and at the critical angle) a delta lobe's direction and
+    # Fresnel weight change without bound: their derivative there is left
+    # out (eq. 30), a bias measured in the README
+    grazing = delta & (dr.minimum(dr.abs(bs.wo.z), dr.abs(dr.detach(si.wi.z))) < GRAZING_COSINE)
+    wo_world = dr.select(delta & ~grazing, si.to_world(bs_att.wo), wo_world)
     value = bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta)
     value = dr.select(delta, weight_att * bs_att.pdf, value)
-    return wo_world, dr.select(dr.detach(value) != 0.0, dr.relative_grad(value), 1.0)
+    return wo_world, dr.select((dr.detach(value) != 0.0) & ~grazing, dr.relative_grad(value), 1.0)
 
 
 @dataclasses.dataclass

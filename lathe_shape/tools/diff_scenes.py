@@ -9,7 +9,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "lathe_scene", "profile_string"]
+__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "glass_scene", "lathe_scene", "profile_string"]
 
 #: A vase-like polyline (both ends on the axis): smooth joints on the bowl,
 #: creases at the rim of the top cap and at the foot.
@@ -65,4 +65,51 @@ def lathe_scene(profile: str | np.ndarray = DEFAULT_PROFILE, kind: str = "polyli
                                "intensity": {"type": "rgb", "value": 20.0}}
     for k, (azimuth, height) in enumerate(views):
         scene[f"camera_{k}"] = _camera(azimuth, resolution, 0.6, 3.0, height)
+    return mi.load_dict(scene)
+
+
+def _smooth_texture(size: int = 128) -> mi.TensorXf:
+    """A smooth, non-symmetric grey pattern (finite differences through
+    glass need a smooth background: a textured one makes them mostly edge
+    crossings)."""
+    u = np.linspace(0.0, 1.0, size)
+    wave_u = np.sin(2 * np.pi * (2 * u + 0.1))
+    wave_v = np.cos(2 * np.pi * (1.5 * u + 0.2))
+    value = 0.5 + 0.4 * wave_u[None, :] * wave_v[:, None]
+    return mi.TensorXf(np.repeat(value[..., None], 3, axis=2).astype(np.float32))
+
+
+def glass_scene(filename: str, kind: str = "polyline", lighting: str = "area", resolution: int = 48,
+                height: float = 2.0, max_depth: int = 12, integrator: str = "lathe_prb") -> mi.Scene:
+    """A clear glass (``dielectric``, IOR 1.5) of the profile file
+    ``filename`` (``kind``), scaled to ``height`` units, seen from the side
+    in front of smooth light: ``lighting="area"``, a textured emissive
+    backdrop behind it; ``"envmap"``, a smooth environment map. The glass's
+    id is ``glass``."""
+    if lighting not in ("area", "envmap"):
+        raise ValueError(f"glass_scene: unknown lighting '{lighting}' (expected area or envmap)")
+    probe = mi.load_dict({"type": "lathe", "filename": filename, "kind": kind})
+    top = float(probe.bbox().max.z)
+    transform = mi.ScalarTransform4f
+    scale = height / top
+    scene: dict[str, object] = {
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": max_depth},
+        "camera": {"type": "perspective", "fov": 32,
+                   "to_world": transform().look_at(origin=[0.0, -6.0, 0.8 * height],
+                                                   target=[0.0, 0.0, 0.5 * height], up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": 16}},
+        "glass": {"type": "lathe", "filename": filename, "kind": kind, "to_world": transform().scale(scale),
+                  "bsdf": {"type": "dielectric", "int_ior": 1.5}},
+    }
+    texture = {"type": "bitmap", "data": _smooth_texture(), "raw": True, "filter_type": "bilinear"}
+    if lighting == "area":
+        scene["backdrop"] = {"type": "rectangle",
+                             "to_world": transform().translate([0, 3, 0.5 * height]).rotate([1, 0, 0], 90)
+                             .scale([2.5 * height, 2.5 * height, 1]),
+                             "emitter": {"type": "area", "radiance": texture}}
+    else:
+        scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(_smooth_texture(64).numpy())}
     return mi.load_dict(scene)

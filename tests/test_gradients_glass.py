@@ -1,0 +1,66 @@
+"""Profile gradients on the hollow glasses users render: ``lathe_prb``'s
+forward-mode gradient against central finite differences of the exact
+render, on the glass's interior pixels (camera rays that meet the glass,
+eroded by two pixels: no outline pixels), where camera paths cross four
+walls of glass, and forward against backward mode.
+
+Before the differential pass followed rays through Dirac-delta chains, the
+wine glass's outer-wall vertex gave a uniform band of -11 to -18 per pixel
+where finite differences give -0.07 to +1.4 (the area-measure Jacobian of
+a thin wall's two sides, applied at a glass vertex)."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from lathe_shape.plugin.shape import scene_lathes
+from lathe_shape.tools.diff_scenes import glass_scene
+from lathe_shape.tools.gradients import forward_gradient, glass_gradient
+
+#: (profile file, kind, flat index into its points, what it is). Measured
+#: at 48x48, 256 spp, seed 3, h = 0.1 profile units (0.5% of the height):
+#: per-pixel correlation 0.96-0.99, AD-on-FD regression slope 0.84-1.04.
+CASES = [
+    ("scenes/wine_glass.csv", "polyline", 60, "outer bowl wall r"),
+    ("scenes/wine_glass.csv", "polyline", 61, "outer bowl wall z"),
+    ("scenes/wine_glass.csv", "polyline", 19, "inner wall below the rim z"),
+    ("scenes/wine_glass.csv", "polyline", 21, "inner wall at the rim z"),
+    ("scenes/wine_glass.csv", "polyline", 24, "rim bead r"),
+]
+
+
+@pytest.fixture(scope="module")
+def wine_glass():
+    return glass_scene("scenes/wine_glass.csv", resolution=48)
+
+
+@pytest.mark.parametrize("filename, kind, index, what", CASES, ids=[c[3] for c in CASES])
+def test_glass_gradient_matches_finite_differences(wine_glass, filename, kind, index, what):
+    scene = wine_glass if filename == "scenes/wine_glass.csv" else glass_scene(filename, kind, resolution=48)
+    check = glass_gradient(scene, scene_lathes(scene)[0], index, h=0.1, spp=256, seed=3)
+    interior = check.interior
+    assert (check.walls[interior] >= 4).all()  # the bowl: four walls on every interior pixel
+    assert np.abs(check.fd[interior]).sum() > 1.0  # a gradient well above the FD's noise
+    assert check.correlation() > 0.9, what
+    slope = (check.ad[interior] * check.fd[interior]).sum() / np.square(check.fd[interior]).sum()
+    assert 0.8 < slope < 1.2, (what, slope)
+
+
+def test_backward_equals_forward_on_hollow_glass(wine_glass):
+    """The adjoint of a weighted image sum equals the forward-mode gradient
+    weighted the same way, for two coordinates at once."""
+    scene = wine_glass
+    params = mi.traverse(scene)
+    key = "glass.points"
+    weights = np.random.default_rng(0).uniform(-1.0, 1.0, (48, 48, 3)).astype(np.float32)
+    forward = [float((forward_gradient(scene, key, i, spp=16, seed=5) * weights).sum()) for i in (60, 21)]
+    value = params[key]
+    dr.enable_grad(value)
+    params.update()
+    scene.integrator().render_backward(scene, params, mi.TensorXf(weights), seed=5, spp=16)
+    backward = np.array(dr.grad(value))[[60, 21]]
+    dr.disable_grad(value)
+    np.testing.assert_allclose(backward, forward, rtol=2e-3, atol=1e-3)
