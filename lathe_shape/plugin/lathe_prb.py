@@ -25,29 +25,30 @@
      - integer
      - Camera rays on each side of every outline sample. (Default: 4)
 
-Path Replay Backpropagation (Mitsuba's ``prb``: a primal pass, then a
-replay of the same paths that propagates derivatives vertex by vertex) on
-the exact lathe geometry of ``lathe_path``: hits come from
-:class:`~lathe_shape.plugin.scene_geometry.ExactSceneGeometry` (detached
-kernel solves), and each lathe hit is then attached to the lathe's
-``points`` parameter by implicit differentiation
-(:mod:`lathe_shape.plugin.attached_hits`, docs/method.md eqs. 21-25): its
-position, geometric normal and interpolated shading normal carry
-derivatives with respect to the profile. BSDF and emitter parameters are
-differentiated as ``prb`` does. Use it through ``mi.render(scene, params,
-...)`` with ``dr.backward`` or ``dr.forward``.
+Differentiable path tracing on the exact lathe geometry of ``lathe_path``.
+The primal render is one symbolic loop, as ``lathe_path``'s. The
+differential pass (``render_forward``, ``render_backward``) traces the same
+paths again, one kernel per vertex, with every lathe hit attached to the
+lathe's ``points`` parameter by implicit differentiation
+(:mod:`lathe_shape.plugin.attached_hits`, docs/method.md eqs. 21-25) and
+every ray following the vertices that made it: through a Dirac-delta chain
+(a glass's four walls) the directions turn and the later vertices slide as
+the profile moves (eqs. 28-30). Dr.Jit's AD graph keeps each vertex for the
+reverse pass, so memory grows with the path length (at most
+:data:`MAX_DIFFERENTIAL_DEPTH` vertices). BSDF and emitter parameters are
+differentiated too. Use it through ``mi.render(scene, params, ...)`` with
+``dr.backward`` or ``dr.forward``.
 
 What is differentiated: everything that varies smoothly with the profile at
 a fixed set of visible surfaces (shading, the light's distance and angle,
-the solid-angle change of moving vertices: "interior" derivatives). Not
+refraction and reflection through glass: "interior" derivatives). Not
 included in that part: the change of *which* surface a ray sees. At the
 lathe's outline as the camera sees it, that change is added by edge
 sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
 26-27); shadow boundaries and outlines seen through other surfaces are
 left out (their share is measured in the README, "Differentiable lathes"),
-as is the motion of directions through Dirac-delta BSDFs (glass, mirrors),
-which ``prb`` omits as well. Non-lathe shapes are not differentiated with
-respect to their geometry.
+as is a delta vertex within 0.1 cosine of grazing (eq. 30). Non-lathe
+shapes are not differentiated with respect to their geometry.
 
 Eq. 11 under differentiation (docs/method.md, eq. 25): each policy's decision
 (terminate, use the geometric frame, reject a light sample) is taken on the
@@ -148,7 +149,7 @@ class _Path:
 
 
 class LathePRBIntegrator(RBIntegrator):
-    """Path Replay Backpropagation with exact, differentiable lathes (see
+    """Differentiable path tracing with exact lathes (see
     the module docstring for the parameters)."""
 
     def __init__(self, props: mi.Properties) -> None:
