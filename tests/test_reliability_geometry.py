@@ -305,3 +305,26 @@ def test_parallel_loading_of_many_lathes():
     assert np.allclose(np.sort(lo), 3.0 * np.arange(n) - 1.0, atol=1e-3)
     ray = mi.Ray3f(mi.Point3f(3.0 * (n - 1), -5.0, 0.5), mi.Vector3f(0, 1, 0))
     assert abs(loaded.ray_intersect(ray).t[0] - 4.0) < 1e-3
+
+
+# ---------------------------------------------------------------------------
+# 7. Building a long polyline's kernel data checks its memory first
+# ---------------------------------------------------------------------------
+
+def test_polyline_kernel_data_checks_memory_first(monkeypatch):
+    """The kernel data (segment tree) of a long polyline, built at the
+    first exact query, is refused before building when its estimate
+    exceeds half the available memory: the error names the lathe, the
+    parameter and the estimate."""
+    from lathe_shape.kernels import polyline
+    z = np.linspace(0.0, 1.0, 2000)
+    points = np.concatenate([[[0.0, 0.0]], np.stack([1.0 + 0.1 * np.sin(20 * z), z], 1), [[0.0, 1.0]]])
+    shape = mi.load_dict({"type": "lathe", "id": "vase", "mesh_segments": 8,
+                          "profile": ", ".join(f"{float(r)!r} {float(h)!r}" for r, h in points)})
+    monkeypatch.setattr(polyline, "available_memory", lambda: 4_000_000)
+    ray = mi.Ray3f(mi.Point3f(0.0, -5.0, 0.5), mi.Vector3f(0.0, 1.0, 0.0))
+    with pytest.raises(ValueError, match=r"lathe 'vase': parameter 'profile': the exact kernel's data for "
+                                         r"2,001 profile segments would take about 6\.0 MB"):
+        shape.ray_intersect_exact(ray)
+    monkeypatch.undo()
+    assert abs(shape.ray_intersect_exact(ray).t[0] - 4.0) < 0.2

@@ -69,6 +69,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..memory import available_memory, format_bytes
 from ..profiles.polyline import Profile
 from .common import (
     BVH_DEPTH,
@@ -99,6 +100,14 @@ __all__ = [
     "polyline_geometry",
     "walk_and_test_polyline",
 ]
+
+#: Peak memory of building the kernel data per profile segment (bytes):
+#: measured 2.7 GB above the process for 1,000,000 points (the tree is built
+#: node by node in Python), with margin (issue 24, item 7).
+BYTES_PER_SEGMENT = 3000
+
+#: Share of the available memory that building the kernel data may take.
+MEMORY_SHARE = 0.5
 
 #: Joint tolerance relative to the profile size (max of r extent, z extent:
 #: the kernel works in the unit frame of kernels/common.py, where it is 1).
@@ -189,7 +198,21 @@ def _segments(start, end) -> tuple[np.ndarray, np.ndarray]:
     return p0, p1
 
 
-def build_polyline_data(start, end, normal_start=None, normal_end=None) -> PolylineData:
+def check_build_memory(segments: int, who: str, available: int | None = None) -> None:
+    """Refuse, before building anything, kernel data for ``segments``
+    segments whose estimated peak (:data:`BYTES_PER_SEGMENT` each) exceeds
+    :data:`MEMORY_SHARE` of the available memory; the ValueError names
+    ``who``, the estimate and what is available."""
+    available = available_memory() if available is None else available
+    need = segments * BYTES_PER_SEGMENT
+    if available is not None and need > MEMORY_SHARE * available:
+        raise ValueError(f"{who}: the exact kernel's data for {segments:,} profile segments would take "
+                         f"about {format_bytes(need)} to build, more than half the memory available "
+                         f"({format_bytes(available)}); use fewer profile points")
+
+
+def build_polyline_data(start, end, normal_start=None, normal_end=None,
+                        who: str = "build_polyline_data()") -> PolylineData:
     """Pack a polyline profile into opaque Dr.Jit buffers.
 
     ``start`` and ``end`` are ``(m, 2)`` arrays of the segments' ``(r, z)``
@@ -200,6 +223,7 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None) -> Polyl
     (eqs. 8-9: flat shading).
     """
     p0, p1 = _segments(start, end)
+    check_build_memory(len(p0), who)
     r0, z0 = p0.T
     r1, z1 = p1.T
     dr_ = r1 - r0
@@ -297,8 +321,8 @@ def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData
     shading normals when ``smooth``, else flat (geometric) normals."""
     start, end = profile.segment_points()
     if smooth:
-        return build_polyline_data(start, end, profile.normal_start, profile.normal_end)
-    return build_polyline_data(start, end)
+        return build_polyline_data(start, end, profile.normal_start, profile.normal_end, who=profile.source)
+    return build_polyline_data(start, end, who=profile.source)
 
 
 # ---------------------------------------------------------------------------
