@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,11 +30,13 @@ from .images import read_exr, write_images
 __all__ = [
     "JOB_KEYS",
     "Frame",
+    "FramePlan",
     "frame_angle",
     "frame_pngs",
     "frame_state",
     "frame_stem",
     "plan_frames",
+    "png_complete",
     "write_frame",
 ]
 
@@ -65,33 +67,82 @@ def frame_stem(index: int, count: int) -> str:
     return f"frame_{index:0{digits}d}"
 
 
+class FramePlan(Sequence[Frame]):
+    """The frames ``frames`` (indices) of a ``count``-frame turn, made when
+    asked for (a plan holds its indices, not a :class:`Frame` per index: a
+    turn may have a million frames). ``plan[k]`` is the k-th frame of the
+    plan, :meth:`frame` the frame of a given index."""
+
+    def __init__(self, count: int, frames: Sequence[int], out_dir: str | os.PathLike, seed: int = 0,
+                 same_seed: bool = False) -> None:
+        self.count, self.indices, self.out_dir = count, frames, os.fspath(out_dir)
+        self.seed, self.same_seed = seed, same_seed
+
+    def frame(self, index: int) -> Frame:
+        """Frame ``index`` of the turn."""
+        stem = os.path.join(self.out_dir, frame_stem(index, self.count))
+        frame_seed = self.seed if self.same_seed else self.seed + index
+        return Frame(index, self.count, frame_angle(index, self.count), frame_seed, stem + ".exr",
+                     stem + ".png")
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def __getitem__(self, position):  # (int -> Frame; slice -> FramePlan)
+        if isinstance(position, slice):
+            return FramePlan(self.count, self.indices[position], self.out_dir, self.seed, self.same_seed)
+        return self.frame(self.indices[position])
+
+    def __iter__(self) -> Iterator[Frame]:
+        return (self.frame(index) for index in self.indices)
+
+
 def plan_frames(count: int, frames: Sequence[int], out_dir: str | os.PathLike, seed: int = 0,
-                same_seed: bool = False) -> list[Frame]:
-    """The :class:`Frame` list for ``frames`` (indices) of a ``count``-frame
-    turn written to ``out_dir``; frame ``k`` is sampled with seed ``seed + k``
-    (``seed`` for all frames with ``same_seed``)."""
-    out_dir = os.fspath(out_dir)
-    plan = []
-    for index in frames:
-        stem = os.path.join(out_dir, frame_stem(index, count))
-        angle = frame_angle(index, count)
-        frame_seed = seed if same_seed else seed + index
-        plan.append(Frame(index, count, angle, frame_seed, stem + ".exr", stem + ".png"))
-    return plan
+                same_seed: bool = False) -> FramePlan:
+    """The :class:`Frame` sequence (a :class:`FramePlan`, made lazily) for
+    ``frames`` (indices) of a ``count``-frame turn written to ``out_dir``;
+    frame ``k`` is sampled with seed ``seed + k`` (``seed`` for all frames
+    with ``same_seed``)."""
+    return FramePlan(count, frames, out_dir, seed, same_seed)
+
+
+#: The last chunk of every PNG file: length 0, ``IEND``, its CRC-32.
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def png_complete(path: str | os.PathLike, width: int, height: int) -> bool:
+    """Whether ``path`` looks like a whole ``width`` x ``height`` PNG: the
+    PNG signature, an ``IHDR`` chunk of that size, and the ``IEND`` chunk at
+    the very end (a truncated or foreign file lacks one of them). Reads 33
+    bytes at the start and 12 at the end, not the image."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(33)
+            if len(head) < 33 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[8:16] != b"\x00\x00\x00\x0dIHDR":
+                return False
+            if (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) != (width, height):
+                return False
+            f.seek(-len(_PNG_END), os.SEEK_END)
+            return f.read() == _PNG_END
+    except OSError:
+        return False
 
 
 def frame_state(
     frame: Frame, expect: dict[str, object] | None = None, size: tuple[int, int] | None = None
 ) -> str:
     """Is ``frame`` already on disk? ``"missing"`` (no complete EXR + PNG
-    pair, or an unreadable EXR), ``"stale"`` (a readable frame of another
-    job: a header attribute differs from ``expect``, or the image from
-    ``size`` = (width, height)) or ``"done"``."""
+    pair: an unreadable EXR, or a PNG that is not whole or not of the EXR's
+    size, see :func:`png_complete`), ``"stale"`` (a readable frame of
+    another job: a header attribute differs from ``expect``, or the image
+    from ``size`` = (width, height)) or ``"done"``."""
     if not (os.path.isfile(frame.exr) and os.path.isfile(frame.png)):
         return "missing"
     try:
         pixels, header = read_exr(frame.exr)
     except Exception:  # truncated or foreign file: render it again
+        return "missing"
+    if not png_complete(frame.png, pixels.shape[1], pixels.shape[0]):
         return "missing"
     if size is not None and tuple(pixels.shape[:2]) != (size[1], size[0]):
         return "stale"
