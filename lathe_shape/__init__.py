@@ -31,19 +31,15 @@ def _command_name() -> str | None:
     return None
 
 
-def _interrupted_while_importing(signum, frame) -> None:  # noqa: ARG001 (signal handler)
-    """A Ctrl-C while a command still imports (Mitsuba and Dr.Jit take a few
-    tenths of a second): the command's one-line message, no traceback. The
-    command restores Python's handler when it starts (cli/common.py)."""
-    _sys.stderr.write(f"{_command_name()}: interrupted\n")
-    _sys.stderr.flush()
-    _os._exit(130)
-
-
 if _command_name() and _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
-    _signal.signal(_signal.SIGINT, _interrupted_while_importing)
+    # A command process: a watcher thread owns Ctrl-C from here on, also
+    # while Mitsuba and Dr.Jit still import and while a render runs (their
+    # threads inherit the blocked SIGINT; see cli/interrupts.py).
+    from .cli import interrupts as _interrupts
 
-import mitsuba as mi  # noqa: E402 (after the import-time Ctrl-C handler)
+    _interrupts.install(_command_name())
+
+import mitsuba as mi  # noqa: E402 (after the Ctrl-C watcher)
 
 from .plugin.variants import MIN_LLVM_VERSION, check_llvm, on_variant_change, register  # noqa: E402
 from .profiles import Profile, ProfileError, make_profile  # noqa: E402

@@ -19,15 +19,23 @@ is reported the same way, with its type named (``PROG: error: MemoryError:
 ...``), and the environment variable ``LATHE_TRACEBACK=1`` shows its
 traceback for debugging.
 
-Renders run in a worker thread (:func:`interruptible`) while the main thread
-waits in steps of a tenth of a second: Python runs its Ctrl-C handler only in
-the main thread between bytecodes, so a Dr.Jit kernel launched from the main
-thread would hold Ctrl-C back until the kernel returns (tens of seconds for
-a large render). A running kernel cannot be cancelled: on Ctrl-C the command
-prints its message and ends the process at once (``os._exit``, after the
-main thread's clean-up has removed any temporary file); output files are
-written under temporary names and renamed when complete, so an interrupted
-command leaves no partial file.
+In a command process Ctrl-C belongs to a watcher thread (see
+:mod:`.interrupts`): SIGINT is blocked in every thread, so neither Python's
+handler nor the one Mitsuba installs during each render ever runs, and the
+watcher ends the process (status 130, ``os._exit``: a running kernel cannot
+be cancelled) within a fraction of a second at any moment, after removing
+the files being written: output files are written in a hidden staging
+folder and moved into place when complete, all files of one output at once
+(:func:`write_staged`), so an interrupted command leaves no partial output.
+
+Called in-process (``main(argv)``), Ctrl-C raises KeyboardInterrupt: renders
+then run in a worker thread (:func:`interruptible`) while the main thread
+waits in steps of a tenth of a second, since Python runs its Ctrl-C handler
+only in the main thread between bytecodes.
+
+Scene values are checked like the options (:func:`check_sensor`): a film of
+width or height 0, or a sampler of 0 samples per pixel (without ``--spp``),
+is refused naming the file and the parameter.
 
 Limits checked before a render (:func:`check_render_budget`):
 
@@ -58,7 +66,6 @@ import os
 import queue
 import signal
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -68,6 +75,7 @@ from typing import TextIO, TypeVar
 import numpy as np
 
 from ..memory import available_memory, format_bytes
+from . import interrupts
 
 __all__ = [
     "DEFAULT_VARIANT",
@@ -84,6 +92,7 @@ __all__ = [
     "check_between",
     "check_render_budget",
     "check_render_options",
+    "check_sensor",
     "command_parser",
     "error_message",
     "film_channels",
@@ -100,6 +109,7 @@ __all__ = [
     "root_message",
     "run_command",
     "select_variant",
+    "write_staged",
 ]
 
 #: The variant every command uses unless ``--variant`` says otherwise.
@@ -340,6 +350,29 @@ def check_render_options(args: argparse.Namespace) -> None:
     parse_defines(getattr(args, "defines", None))
 
 
+def check_sensor(scene, path: str | os.PathLike, spp: int | None = None) -> tuple[int, int, int]:
+    """(width, height, samples per pixel) of the first sensor of ``scene``
+    (loaded from the file ``path``): ``spp`` (the ``--spp`` option), or
+    the sampler's ``sample_count`` when None. Raises :class:`CliError`
+    naming the file and the parameter when the scene has no sensor, when
+    its film is 0 pixels wide or high, or when its sampler takes 0 samples
+    per pixel (Mitsuba would fail in a kernel, or crash)."""
+    if not scene.sensors():
+        raise CliError(f"{os.fspath(path)}: the scene has no sensor")
+    sensor = scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().size())
+    for name, value in (("width", width), ("height", height)):
+        if value < 1:
+            raise CliError(f"{os.fspath(path)}: the film's '{name}' is {value}: it must be at least 1 "
+                           "(fix the scene, or set --resolution)")
+    if spp is None:
+        spp = int(sensor.sampler().sample_count())
+        if spp < 1:
+            raise CliError(f"{os.fspath(path)}: the sampler's 'sample_count' is {spp}: it must be at "
+                           "least 1 (fix the scene, or set --spp)")
+    return width, height, int(spp)
+
+
 def check_render_budget(width: int, height: int, spp: int, available: int | None = None) -> None:
     """Refuse a render of ``spp`` samples per pixel on a ``width`` x ``height``
     film that cannot run correctly: more memory than :data:`MEMORY_FRACTION`
@@ -503,13 +536,37 @@ def output_folder(path: str | os.PathLike) -> str:
     path = os.path.abspath(os.fspath(path))
     if os.path.exists(path) and not os.path.isdir(path):
         raise CliError(f"output folder '{path}' exists and is not a folder")
+    probe = os.path.join(path, f".write-test-{os.getpid()}-{threading.get_ident()}")
+
+    def remove_probe() -> None:
+        if os.path.exists(probe):
+            os.remove(probe)
+
     try:
-        os.makedirs(path, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
-            pass
+        with interrupts.on_interrupt(remove_probe):
+            os.makedirs(path, exist_ok=True)
+            try:
+                os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+            finally:
+                remove_probe()
     except OSError as e:
         raise CliError(f"cannot write to output folder '{path}' ({e.strerror or e})") from None
     return path
+
+
+def write_staged(folder: str, writes: list[tuple[Callable[[str], list[str]], str]]) -> list[str]:
+    """Run each ``write(stem)`` of ``writes`` (which writes files named
+    ``stem`` + extension and returns their paths) with ``stem`` in a hidden
+    staging folder inside ``folder`` (:class:`.interrupts.Staging`), then
+    move all the files into ``folder`` at once under their names (the
+    ``name`` of each pair + extension). An interrupted or failed write
+    leaves none of them. Returns the final paths."""
+    with interrupts.Staging(folder) as staging:
+        names = []
+        for write, name in writes:
+            for path in write(staging.stage(name)):
+                names.append(os.path.basename(path))
+        return staging.commit(names)
 
 
 def format_duration(seconds: float) -> str:
@@ -607,12 +664,7 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     command run from the command line was interrupted, the process ends
     here, with that status, without waiting for the render or for the
     interpreter's shutdown."""
-    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler and \
-            threading.current_thread() is threading.main_thread() and \
-            getattr(signal.getsignal(signal.SIGINT), "__module__", None) == "lathe_shape":
-        # Importing the package installed a quiet exit for Ctrl-C; from here
-        # on an interrupt is a KeyboardInterrupt reported by _report.
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+    interrupts.set_prog(prog)  # (the watcher's message, in a command process)
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:
@@ -623,6 +675,11 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     # interrupted ends here too: a Ctrl-C that lands while Dr.Jit or
     # Mitsuba threads wind down can otherwise abort the interpreter's
     # shutdown ("terminate called without an active exception", status 134).
+    if argv is None and interrupts.installed():
+        # A command process ends here: a Ctrl-C during the interpreter's
+        # shutdown (tenths of a second of Mitsuba and Dr.Jit teardown) would
+        # otherwise be lost and the command exit 0.
+        interrupts.exit(status)
     if not _all_work_done() or (status == 130 and argv is None):
         sys.stdout.flush()
         sys.stderr.flush()

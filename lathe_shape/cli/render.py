@@ -22,16 +22,17 @@ import sys
 import time
 
 from .common import (
-    CliError,
     add_output_option,
     add_render_options,
     check_render_budget,
     check_render_options,
+    check_sensor,
     command_parser,
     open_scene,
     output_folder,
     render_film,
     run_command,
+    write_staged,
 )
 
 __all__ = ["main", "build_parser"]
@@ -56,13 +57,11 @@ def render(args: argparse.Namespace) -> int:
 
     check_render_options(args)
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
-    if not scene.sensors():
-        raise CliError(f"{args.scene}: the scene has no sensor")
-    sensor = scene.sensors()[0]
-    width, height = sensor.film().size()
-    spp = args.spp or sensor.sampler().sample_count()
+    width, height, spp = check_sensor(scene, args.scene, args.spp)
     check_render_budget(width, height, spp)
-    stem = os.path.join(output_folder(args.output), os.path.splitext(os.path.basename(args.scene))[0])
+    name = os.path.splitext(os.path.basename(args.scene))[0]
+    folder = output_folder(args.output)
+    stem = os.path.join(folder, name)
     integrator = scene_integrator(scene)
     print(
         f"lathe-render: {args.scene} -> {stem}.exr\n"
@@ -81,7 +80,8 @@ def render(args: argparse.Namespace) -> int:
         "scene": os.path.abspath(args.scene),
         "render_seconds": float(elapsed),
     }
-    written = write_images(stem, image, metadata, png=not args.no_png, channels=channels)
+    written = write_staged(folder, [(lambda staged: write_images(staged, image, metadata, png=not args.no_png,
+                                                                 channels=channels), name)])
     print(f"  rendered in {elapsed:.2f} s; wrote {', '.join(written)}")
     return 0
 
