@@ -103,27 +103,35 @@ def difference_image(exact: np.ndarray, mesh: np.ndarray, scale: float | None = 
     return np.round(np.clip(rgb, 0, 1) * 255).astype(np.uint8), scale
 
 
+#: ``max_depth`` in an integrator's description: ``max_depth = 16,`` on a
+#: line of its own (Mitsuba's integrators), ``[max_depth=16, ...`` (ours).
+_MAX_DEPTH = re.compile(r"(?<!\w)max_depth\s*=\s*(-?\d+)")
+
+
 def _printed_max_depth(integrator) -> int | None:
-    """``max_depth = N`` from the integrator's description, if it says."""
-    for line in str(integrator).splitlines():
-        key, sep, value = line.strip().partition("=")
-        if sep and key.strip() == "max_depth":
-            try:
-                return int(value.strip().rstrip(","))
-            except ValueError:
-                return None
-    return None
+    """``max_depth`` from the integrator's description, if it says."""
+    match = _MAX_DEPTH.search(str(integrator))
+    return int(match.group(1)) if match else None
+
+
+def _integrator_max_depth(integrator) -> int | None:
+    """``max_depth`` of ``integrator``: its attribute (the package's Python
+    integrators), its parameter (``mi.traverse``), else its description."""
+    import mitsuba as mi
+
+    depth = getattr(integrator, "max_depth", None)
+    if isinstance(depth, int) and not isinstance(depth, bool):
+        return depth
+    params = mi.traverse(integrator)
+    return int(params["max_depth"]) if "max_depth" in params else _printed_max_depth(integrator)
 
 
 def _scene_max_depth(scene) -> int | None:
     """max_depth of the scene's integrator, if it has one (-1: no limit)."""
-    import mitsuba as mi
-
     integrator = scene.integrator()
     if integrator is None:
         return None
-    params = mi.traverse(integrator)
-    depth = int(params["max_depth"]) if "max_depth" in params else _printed_max_depth(integrator)
+    depth = _integrator_max_depth(integrator)
     # Mitsuba keeps max_depth as a 32-bit unsigned integer: the -1 (no limit)
     # of the scene file reads back as 4294967295. Print it as the file says.
     return -1 if depth is not None and depth >= 2**31 else depth
@@ -134,7 +142,7 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     lathe, and fit the limits of :func:`~.common.check_render_budget`) and
     create the output folder; returns (scene, number of lathes, folder,
     spp)."""
-    from .common import check_render_budget, check_render_options, open_scene, output_folder
+    from .common import check_render_budget, check_render_options, check_sensor, open_scene, output_folder
 
     check_render_options(args)
     check_at_least("--mesh-segments", args.mesh_segments, 3)
@@ -150,15 +158,13 @@ def open_comparison(args: argparse.Namespace) -> tuple[object, int, str, int]:
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution, extra, edit)
     from ..plugin.shape import scene_lathes  # (needs the variant open_scene selected)
 
-    if not scene.sensors():
-        raise CliError(f"{args.scene}: the scene has no sensor")
+    width, height, spp = check_sensor(scene, args.scene, args.spp)
     lathes = len(scene_lathes(scene))
     if not lathes:
         raise CliError(f"{args.scene}: the scene has no lathe shape to compare")
     if args.mesh_segments is not None:
         _check_mesh_segments(args.scene, scene_lathes(scene), args.mesh_segments)
-    spp = args.spp or scene.sensors()[0].sampler().sample_count()
-    check_render_budget(*scene.sensors()[0].film().size(), spp)
+    check_render_budget(width, height, spp)
     stem = os.path.splitext(os.path.basename(args.scene))[0]
     return scene, lathes, output_folder(args.output or f"{stem}_compare"), spp
 
@@ -213,20 +219,29 @@ def render_both(args: argparse.Namespace, scene, spp: int,
 
 def write_comparison(args: argparse.Namespace, out: str, spp: int,
                      images: dict[str, tuple[np.ndarray, float, list[str]]]) -> float:
-    """Write ``exact`` and ``mesh`` (EXR + PNG) and ``diff.png``, each under a
-    temporary name renamed when complete; returns the difference's scale."""
+    """Write ``exact`` and ``mesh`` (EXR + PNG) and ``diff.png`` in a staging
+    folder, and move the five files into ``out`` at once when all are
+    complete (:func:`~.common.write_staged`); returns the difference's
+    scale."""
     import mitsuba as mi
 
-    from ..tools.images import atomic_path, write_images
+    from ..tools.images import write_images
+    from .common import write_staged
 
-    for name, (image, seconds, channels) in images.items():
+    def image_writer(name: str):
+        image, seconds, channels = images[name]
         metadata = {"spp": int(spp), "integrator": RUNS[name]["type"], "seed": int(args.seed),
                     "variant": args.variant, "scene": os.path.abspath(args.scene),
                     "render_seconds": float(seconds)}
-        write_images(os.path.join(out, name), image, metadata, channels=channels)
+        return lambda stem: write_images(stem, image, metadata, channels=channels)
+
     diff_png, scale = difference_image(images["exact"][0], images["mesh"][0])
-    with atomic_path(os.path.join(out, "diff.png")) as tmp:
-        mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(tmp)
+
+    def write_diff(stem: str) -> list[str]:
+        mi.Bitmap(diff_png, pixel_format=mi.Bitmap.PixelFormat.RGB).write(stem + ".png")
+        return [stem + ".png"]
+
+    write_staged(out, [*((image_writer(name), name) for name in images), (write_diff, "diff")])
     return scale
 
 

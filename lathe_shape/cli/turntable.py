@@ -8,7 +8,12 @@ put instead of flickering) or ``--seed + k`` (``--seeds frame``), so the job
 can be split with ``--frames`` across processes or machines, and an
 interrupted run resumes where it stopped (finished frames are skipped).
 Frame ``k`` is denoised and written by a background thread while frame
-``k + 1`` renders.
+``k + 1`` renders. A run registers itself in the output folder
+(:mod:`.folder_lock`): a second run of another job there, or of the same
+job on frames the first renders, is refused while the first runs; shards
+of one job (other ``--frames``) may run side by side. ``--count`` is at
+most :data:`MAX_COUNT`; resume reads only the frames whose two files exist,
+and a frame counts as done when its EXR reads and its PNG is whole.
 
 Example::
 
@@ -21,14 +26,17 @@ Example::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import os
 import sys
 import time
-from collections.abc import Callable
+from array import array
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from . import interrupts
 from .common import (
     CliError,
     ProgressBar,
@@ -44,7 +52,7 @@ if TYPE_CHECKING:  # imported where needed: --help needs no Mitsuba variant
     import numpy as np
 
     from ..tools.denoise import Denoiser
-    from ..tools.frames import Frame
+    from ..tools.frames import Frame, FramePlan
     from ..tools.turntable import Turntable
 
 __all__ = ["main", "build_parser", "parse_frames"]
@@ -56,6 +64,10 @@ VIDEOS = ("gif", "mp4")
 
 #: Seeding policies: one seed for all frames, or ``--seed + k`` for frame k.
 SEED_POLICIES = ("same", "frame")
+
+#: Most frames in a turn (``--count``): a million frames play for 23 hours
+#: at 12 fps; checking which are done on resume takes about a second.
+MAX_COUNT = 1_000_000
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_output_option(parser, what="frame_NNNN.exr/.png, turntable.gif/.mp4",
                       default_help="SCENE_turntable in the current folder")
     parser.add_argument("--count", type=int, default=36, metavar="N",
-                        help="frames in the full turn (default: 36)")
+                        help=f"frames in the full turn, at most {MAX_COUNT} (default: 36)")
     parser.add_argument(
         "--frames", metavar="START:STOP",
         help="render only frames START to STOP-1 (half-open, like a Python slice; either end may be "
@@ -211,11 +223,12 @@ def open_job(args: argparse.Namespace) -> Job:
         check_between,
         check_render_budget,
         check_render_options,
+        check_sensor,
         open_scene,
         output_folder,
     )
 
-    check_at_least("--count", args.count, 1)
+    check_between("--count", args.count, 1, MAX_COUNT)
     check_render_options(args)
     if args.seeds == "frame":
         check_between("--seed", args.seed + args.count - 1, 0, UINT32_MAX)  # the last frame's seed
@@ -229,7 +242,8 @@ def open_job(args: argparse.Namespace) -> Job:
     backend, note = choose_backend(args.variant) if args.denoise else ("", "")
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution,
                        edit=scene_edit(args))
-    colours = scene.sensors()[0].film().base_channels_count() if scene.sensors() else 3
+    *_, spp = check_sensor(scene, args.scene, args.spp)
+    colours = scene.sensors()[0].film().base_channels_count()
     if args.denoise and colours < 3:  # (the denoisers take RGB with RGB albedo guides)
         why = f"variant {args.variant} renders luminance only" if "_mono" in args.variant else \
             "its pixel_format is not rgb or rgba"
@@ -238,7 +252,6 @@ def open_job(args: argparse.Namespace) -> Job:
     turntable = Turntable(scene, args.mode, args.object, scene_path=args.scene, guides=args.denoise)
     sensor = turntable.sensor
     size = tuple(int(v) for v in sensor.film().size())
-    spp = args.spp or sensor.sampler().sample_count()
     notes = tuple(turntable.warnings) + ((note,) if note else ())
     rounded = rendered_spp(sensor.sampler(), spp) if args.multijitter else spp
     if rounded != spp:
@@ -294,16 +307,34 @@ def _expected(job: Job, frame: Frame) -> dict[str, object]:
     return {k: v for k, v in job.metadata(frame).items() if k in JOB_KEYS}
 
 
-def pending_frames(job: Job, frames: list[Frame]) -> list[Frame]:
-    """The frames still to render (all with ``--force``); says how many were
-    skipped as finished or are rendered again as another job's."""
-    from ..tools.frames import frame_state
+def job_identity(job: Job) -> dict[str, object]:
+    """The settings that make two runs one job (those that decide whether a
+    frame on disk is this job's, see :func:`_expected`, and the image
+    size), for the output folder's lock."""
+    from ..tools.frames import plan_frames
 
-    todo, stale = [], 0
-    for frame in frames:
-        state = "missing" if job.args.force else frame_state(frame, _expected(job, frame), job.size)
+    first = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed)[0]
+    same = {k: v for k, v in _expected(job, first).items() if k not in ("angle_deg", "seed")}
+    return {**same, "seed": int(job.args.seed), "seeds": job.args.seeds, "size": list(job.size)}
+
+
+def pending_frames(job: Job, frames: FramePlan) -> array:
+    """The indices of the frames still to render (all with ``--force``);
+    says how many were skipped as finished or are rendered again as another
+    job's. Only frames whose two files are in the folder are read."""
+    from ..tools.frames import frame_state, frame_stem
+
+    present = set() if job.args.force else set(os.listdir(job.out_dir))
+    todo, stale = array("q"), 0
+    for index in frames.indices:
+        stem = frame_stem(index, frames.count)
+        if stem + ".exr" not in present or stem + ".png" not in present:
+            todo.append(index)
+            continue
+        frame = frames.frame(index)
+        state = frame_state(frame, _expected(job, frame), job.size)
         if state != "done":
-            todo.append(frame)
+            todo.append(index)
         stale += state == "stale"
     skipped = len(frames) - len(todo)
     notes = [f"{skipped} finished frame(s) skipped"] if skipped else []
@@ -324,25 +355,37 @@ def clean_frame(job: Job, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | N
 
 
 def finish_frame(job: Job, frame: Frame, image: np.ndarray, seconds: float,
-                 cleaned: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+                 cleaned: tuple[np.ndarray, np.ndarray | None] | None = None,
+                 staging: interrupts.Staging | None = None) -> None:
     """Denoise (unless ``cleaned`` already holds the result) and write one
-    rendered frame; runs in the writer thread."""
+    rendered frame; runs in the writer thread. With ``staging``, the frame
+    is written there and its PNG and EXR moved into place together
+    (:meth:`.interrupts.Staging.commit`); on Ctrl-C a write already running
+    may finish (:func:`.interrupts.writing`)."""
     from ..tools.frames import write_frame
 
-    rgb, noisy = cleaned or clean_frame(job, image)
-    try:
-        write_frame(frame, rgb, {**job.metadata(frame), "render_seconds": float(seconds)}, noisy=noisy)
-    except (OSError, RuntimeError) as e:  # (OpenEXR reports a failed write as RuntimeError)
-        # The reason without the hidden temporary file's name when there is one.
-        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
-        raise CliError(f"cannot write frame {frame.index} to {os.path.dirname(frame.exr) or '.'}: "
-                       f"{reason}") from None
+    with interrupts.writing():
+        rgb, noisy = cleaned or clean_frame(job, image)
+        names = [os.path.basename(frame.png), os.path.basename(frame.exr)]  # (the EXR last)
+        staged = frame if staging is None else \
+            dataclasses.replace(frame, png=staging.stage(names[0]), exr=staging.stage(names[1]))
+        try:
+            write_frame(staged, rgb, {**job.metadata(frame), "render_seconds": float(seconds)}, noisy=noisy)
+            if staging is not None:
+                staging.commit(names)
+        except (OSError, RuntimeError) as e:  # (OpenEXR reports a failed write as RuntimeError)
+            # The reason without the hidden temporary file's name when there is one.
+            reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+            raise CliError(f"cannot write frame {frame.index} to {os.path.dirname(frame.exr) or '.'}: "
+                           f"{reason}") from None
 
 
-def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
-    """Render the frames of ``todo``, advancing ``progress`` (skipping those
-    another process on the same folder finished meanwhile); a background
-    thread denoises and writes frame k while frame k + 1 renders."""
+def render_frames(job: Job, frames: FramePlan, todo: Sequence[int], progress: ProgressBar) -> None:
+    """Render the frames of ``todo`` (indices into the turn of ``frames``),
+    advancing ``progress`` (skipping those another process on the same
+    folder finished meanwhile); a background thread denoises and writes
+    frame k while frame k + 1 renders, in a staging folder from which each
+    frame's two files move into place together."""
     from ..tools.frames import frame_state
     from ..tools.writer import FrameWriter, default_workers
     from .common import interruptible, one_render_thread
@@ -357,8 +400,10 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
     workers = default_workers(frame_bytes)
     if job.args.threads is not None:  # (--threads caps the command's CPU use)
         workers = min(workers, job.args.threads)
-    with one_render_thread(), FrameWriter(workers=workers) as writer:
-        for frame in todo:
+    with interrupts.Staging(job.out_dir) as staging, one_render_thread(), \
+            FrameWriter(workers=workers) as writer:
+        for index in todo:
+            frame = frames.frame(index)
             if not job.args.force and frame_state(frame, _expected(job, frame), job.size) == "done":
                 progress.advance(None)
                 continue
@@ -372,7 +417,7 @@ def render_frames(job: Job, todo: list[Frame], progress: ProgressBar) -> None:
                 # denoiser was made: never in a writer thread. (Untested on a GPU with
                 # the OptiX weights: the one lent had none.)
                 cleaned = clean_frame(job, image)
-            writer.submit(functools.partial(finish_frame, job, frame, image, seconds, cleaned))
+            writer.submit(functools.partial(finish_frame, job, frame, image, seconds, cleaned, staging))
             progress.advance(seconds)
 
 
@@ -391,15 +436,21 @@ def render_job(job: Job) -> int:
     threads = dr.thread_count()
     if job.args.threads is not None:
         dr.set_thread_count(job.args.threads)  # restored below: main() may be called in-process
+
+    def interrupted() -> str:
+        return (f"{PROG}: interrupted after {progress.rendered} rendered frame(s); "
+                "run the same command again to resume")
+
     start = time.perf_counter()
     try:
-        render_frames(job, todo, progress)
+        # (the Ctrl-C watcher's message, in a command process: it ends the bar's line too)
+        with interrupts.message(lambda: ("\n" if progress.interactive else "") + interrupted()):
+            render_frames(job, frames, todo, progress)
     except BaseException as e:
         progress.close()  # end the bar's line before any message
         if not is_interrupt(e):
             raise
-        print(f"{PROG}: interrupted after {progress.rendered} rendered frame(s); "
-              "run the same command again to resume", file=sys.stderr)
+        print(interrupted(), file=sys.stderr)
         return 130
     finally:
         if job.args.threads is not None:
@@ -432,11 +483,14 @@ def write_videos(job: Job) -> None:
 
 
 def turntable(args: argparse.Namespace) -> int:
+    from .folder_lock import FolderLock
+
     job = open_job(args)
-    describe(job)
-    status = render_job(job)
-    if status == 0:
-        write_videos(job)
+    with FolderLock(job.out_dir, job_identity(job), job.indices, PROG):
+        describe(job)
+        status = render_job(job)
+        if status == 0:
+            write_videos(job)
     return status
 
 
