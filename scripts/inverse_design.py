@@ -1,14 +1,22 @@
 """Inverse design: recover a hidden lathe profile from two rendered views.
 
 Renders the hidden profile (a 12-point polyline glass or an 8-control-point
-B-spline vase, ``lathe_shape.tools.inverse.HIDDEN_PROFILES``) from two views,
+B-spline vase, ``lathe_shape.tools.inverse.HIDDEN_PROFILES``; or, with
+``--kind hollow``, a clear 17-point hollow wine glass,
+``lathe_shape.tools.inverse_glass.HIDDEN_HOLLOW``) from two views,
 then starts from a cylinder with as many points and optimises the points
 with ``lathe_prb`` gradients (Adam, smoothness and even-spacing
 regularisers, projection onto valid profiles). Prints the loss and the profile RMS error (relative to the
 height) per iteration; writes convergence.png and the target, before and
 after images of every view to -o/--output.
 
-    python scripts/inverse_design.py [--kind polyline|bspline] [--iterations 60] [--resolution 32x32]
+``--kind hollow`` recovers both walls of a clear glass (dielectric, IOR 1.5)
+in front of a smooth coloured environment, seen level and from above,
+starting from a hollow cylinder; it prints the outer and the inner wall's
+RMS errors per iteration (defaults there: 40 iterations, 32x32, 8 spp,
+step 0.02, smoothness 1e-3).
+
+    python scripts/inverse_design.py [--kind polyline|bspline|hollow] [--iterations 60] [--resolution 32x32]
                                      [--spp 16] [--learning-rate 0.02] [--smoothness 3e-3]
                                      [--spacing 3e-3] [--seed 0] [-o inverse_out]
                                      [--variant llvm_ad_rgb]
@@ -39,15 +47,19 @@ PROG = "inverse_design.py"
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--kind", choices=sorted(HIDDEN_PROFILES), default="polyline",
-                        help="profile parameterisation (default: polyline)")
-    parser.add_argument("--iterations", type=int, default=60, help="optimisation steps (default: 60)")
-    add_render_options(parser, spp_default=16, resolution_default="32x32", defines=False,
+    parser.add_argument("--kind", choices=[*sorted(HIDDEN_PROFILES), "hollow"], default="polyline",
+                        help="profile parameterisation, or 'hollow': a clear hollow wine glass, both walls "
+                             "(default: polyline)")
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="optimisation steps (default: 60; hollow: 40)")
+    add_render_options(parser, spp_default=None, resolution_default="32x32", defines=False,
+                       spp_help="16; hollow: 8",
                        seed_help="seed of the pixel samples (default: 0)")
     parser.add_argument("--learning-rate", type=float, default=0.02,
                         help="Adam step size at the start, decaying tenfold (default: 0.02)")
-    parser.add_argument("--smoothness", type=float, default=3e-3,
-                        help="second-difference regulariser weight (decays hundredfold; default: 3e-3)")
+    parser.add_argument("--smoothness", type=float, default=None,
+                        help="second-difference regulariser weight (decays hundredfold; default: 3e-3; "
+                             "hollow: 1e-3)")
     parser.add_argument("--spacing", type=float, default=3e-3,
                         help="even-spacing regulariser weight (decays hundredfold; default: 3e-3)")
     add_output_option(parser, default="inverse_out",
@@ -65,12 +77,46 @@ def square_resolution(text: str) -> int:
     return width
 
 
+def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
+    """``--kind hollow``: both walls of the clear wine glass."""
+    from lathe_shape.tools.inverse_glass import HIDDEN_HOLLOW, plot_hollow_convergence, recover_hollow
+
+    def report(iteration: int, loss: float, errors: tuple[float, float]) -> None:
+        print(f"iteration {iteration:4d}  loss {loss:.6f}  profile error outer wall {100 * errors[0]:.3f}%, "
+              f"inner wall {100 * errors[1]:.3f}% of height", flush=True)
+
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    result = recover_hollow(target, n_outer, args.iterations, side, args.spp, args.learning_rate,
+                            args.smoothness, args.spacing, seed=args.seed, report=report)
+    plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
+                            f"hollow wine glass: {side}x{side}, {args.spp} spp, two views")
+    paths = write_result_images(result, out)
+    outer, inner = result.errors[-1]
+    print(f"final profile RMS error: outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height "
+          f"(start {100 * result.start_errors[0]:.3f}%, {100 * result.start_errors[1]:.3f}%); "
+          f"valid at every step: {all(result.valid)}; {result.seconds:.1f} s; recovered points "
+          f"(the first {n_outer} the outer wall):")
+    for r, z in result.points:
+        print(f"  {r:.4f} {z:.4f}")
+    print(f"wrote {os.path.join(out, 'convergence.png')} and {len(paths)} images")
+    return 0
+
+
 def inverse_design(args: argparse.Namespace) -> int:
+    hollow = args.kind == "hollow"
+    if args.iterations is None:
+        args.iterations = 40 if hollow else 60
+    if args.spp is None:
+        args.spp = 8 if hollow else 16
+    if args.smoothness is None:
+        args.smoothness = 1e-3 if hollow else 3e-3
     check_at_least("--iterations", args.iterations, 1)
     check_at_least("--spp", args.spp, 1)
     side = square_resolution(args.resolution)
     select_variant(args.variant)
     out = output_folder(args.output)
+    if hollow:
+        return hollow_design(args, side, out)
 
     def report(iteration: int, loss: float, error: float) -> None:
         print(f"iteration {iteration:4d}  loss {loss:.6f}  profile error {100 * error:.3f}% of height",

@@ -1,0 +1,423 @@
+"""Inverse design of a hollow glass: recover the outer *and* the inner wall
+of a clear (dielectric, IOR 1.5) lathe from a few renders of it in front of
+smooth coloured light.
+
+The profile is one axis-ended polyline: the outer wall from the bottom on
+the axis up to the rim (``n_outer`` points), then the inner wall back down
+to the inside bottom on the axis. The optimisation starts from a hollow
+cylinder (a tumbler) with as many points on each wall, renders the same
+views with ``lathe_prb`` (gradients through the glass's walls, and the
+outline as the camera sees it) and moves the points with Adam, as
+:func:`lathe_shape.tools.inverse.recover_profile` does. After every step the
+points are projected back onto valid hollow profiles
+(:func:`project_hollow`): each wall z-monotone, the inner wall inside the
+outer one by at least a minimum thickness at every height, the inside
+bottom above the outside bottom; an update that still fails
+(:func:`hollow_valid`, or the profile validation) is retried with a smaller
+step. The image loss is the squared difference summed over a pyramid of
+2 x 2 block averages (:func:`_multiscale_loss`), and the light is a smooth
+environment whose colour is an affine function of the direction (no edge
+anywhere: along the straight path from the start to the target this loss
+then falls nearly monotonically, where behind a backdrop and a floor
+meeting at an edge it rose and fell).
+
+Measured (40 steps, 32x32, 8 spp, two views, seeds 0-2, 47-70 s each): the
+outer wall from 7.8% to 2.6-4.8% of the height, the inner wall from 6.5% to
+4.8-6.1%: not the 1% aimed at. The inner wall is barely recovered: through
+thin walls it changes the image little, and the derivatives ``lathe_prb``
+leaves out (outlines seen through glass, delta vertices near grazing) are
+large on a hollow glass: at the start, the derivative of the loss with
+respect to the outer bowl's widest radius has the opposite sign to its
+finite difference.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..profiles import ProfileError
+from .diff_scenes import profile_string
+from .gradients import points_key
+from .inverse import _distance_to_chain, _smoothness, _spacing, profile_curve, render_views
+
+__all__ = ["GLASS_VIEWS", "HIDDEN_HOLLOW", "HollowResult", "hollow_cylinder_like", "hollow_scene",
+           "hollow_valid", "plot_hollow_convergence", "project_hollow", "recover_hollow", "wall_rms_errors"]
+
+#: The hidden hollow profiles: ``(points, n_outer)``, the first ``n_outer``
+#: points the outer wall (bottom on the axis up to the rim), the others the
+#: inner wall (rim down to the inside bottom on the axis). ``wine_glass``:
+#: 17 points, 2 units tall, after scenes/wine_glass.csv (a foot with a
+#: square edge, a slender stem, a tulip bowl) with a thicker wall (0.05, 2.5%
+#: of the height, against the file's 1%) and a flat rim.
+HIDDEN_HOLLOW = {
+    "wine_glass": (np.array([
+        # Outer wall: foot, stem, bowl, rim
+        (0.0, 0.0), (0.40, 0.0), (0.40, 0.05), (0.14, 0.11), (0.06, 0.28), (0.06, 0.70), (0.22, 0.86),
+        (0.44, 1.12), (0.52, 1.45), (0.47, 1.80), (0.43, 2.0),
+        # Inner wall: rim down to the inside bottom
+        (0.38, 2.0), (0.42, 1.80), (0.47, 1.45), (0.39, 1.14), (0.18, 0.93), (0.0, 0.91)]), 11),
+}
+
+#: Camera placements ``(elevation in degrees, distance)``, all from the same
+#: side (the lights are behind and below the glass): level with the bowl,
+#: and from above (it sees into the bowl, hence the inner wall from inside);
+#: a third from below sees the foot's underside.
+GLASS_VIEWS = ((0.0, 6.0), (32.0, 6.0), (-20.0, 6.0))
+
+
+def _chain_split(points: np.ndarray, n_outer: int) -> tuple[np.ndarray, np.ndarray]:
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    return points[:n_outer], points[n_outer:]
+
+
+def hollow_cylinder_like(target: np.ndarray, n_outer: int, radius: float = 0.7, thickness: float = 0.04,
+                         bottom: float = 0.4) -> np.ndarray:
+    """A hollow cylinder (a tumbler) with as many points on each wall as
+    ``target``: over its z range, outer radius ``radius`` times its widest,
+    wall ``thickness`` and inside bottom at ``bottom`` of the height (all
+    relative to the target's height where lengths). Each wall's points lie
+    on its corners (axis end, bottom corner, rim) and spread over its cap
+    and its side in proportion to their lengths."""
+    outer_t, inner_t = _chain_split(target, n_outer)
+    target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
+    z_lo, z_hi = target[:, 1].min(), target[:, 1].max()
+    height = z_hi - z_lo
+    r_out = radius * target[:, 0].max()
+    r_in = r_out - thickness * height
+    z_in = z_lo + bottom * height
+
+    def wall(corners, count):
+        # ``count`` points along the corner chain: its corners, the others
+        # spread over its legs by length
+        corners = [np.array(c, dtype=np.float64) for c in corners]
+        legs = np.array([np.linalg.norm(b - a) for a, b in zip(corners[:-1], corners[1:], strict=True)])
+        free = count - len(corners)
+        counts = np.floor(free * legs / legs.sum()).astype(int)
+        counts[np.argmax(legs)] += free - counts.sum()
+        chain = [corners[0]]
+        for k, n in enumerate(counts):
+            a, b = corners[k], corners[k + 1]
+            chain += [a + (b - a) * (j + 1) / (n + 1) for j in range(n)] + [b]
+        return chain
+
+    outer = wall([(0.0, z_lo), (r_out, z_lo), (r_out, z_hi)], len(outer_t))
+    inner = wall([(r_in, z_hi), (r_in, z_in), (0.0, z_in)], len(inner_t))
+    return np.array(outer + inner)
+
+
+def _radius_at(chain: np.ndarray, z: np.ndarray, outer: bool) -> np.ndarray:
+    """The radius of the z-monotone ``chain`` at heights ``z``, on the safe
+    side where a flat segment makes it ambiguous: the least radius of the
+    segments at that height for the outer wall, the greatest for the inner
+    wall (a height outside the chain's range takes its nearer end's
+    radius)."""
+    z = np.atleast_1d(np.asarray(z, dtype=np.float64))[:, None]
+    a, b = chain[:-1], chain[1:]
+    lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
+    flat = hi <= lo
+    rise = np.where(flat, 1.0, b[:, 1] - a[:, 1])
+    t = np.clip((z - a[:, 1]) / rise, 0.0, 1.0)
+    pick = np.minimum if outer else np.maximum
+    r = np.where(flat, pick(a[:, 0], b[:, 0]), a[:, 0] + t * (b[:, 0] - a[:, 0]))
+    covers = (z >= lo) & (z <= hi)
+    best = (np.min if outer else np.max)(np.where(covers, r, np.inf if outer else -np.inf), axis=1)
+    z = z[:, 0]
+    nearest = np.where(np.abs(z - chain[0, 1]) <= np.abs(z - chain[-1, 1]), chain[0, 0], chain[-1, 0])
+    return np.where(np.isfinite(best), best, nearest)
+
+
+def project_hollow(points: np.ndarray, n_outer: int, min_radius: float, min_thickness: float) -> np.ndarray:
+    """A valid hollow profile near ``points``: both axis ends on the axis,
+    other radii at least ``min_radius``, the outer wall's heights
+    non-decreasing and the inner wall's non-increasing, the inner rim no
+    higher than the outer rim, the inside bottom at least ``min_thickness``
+    above the outside bottom, and at the height of every point of either
+    wall the inner radius at least ``min_thickness`` inside the outer one
+    (the inner wall's points pulled in where too close, the outer wall's
+    points pushed out)."""
+    p = np.array(points, dtype=np.float64).reshape(-1, 2)
+    outer, inner = p[:n_outer], p[n_outer:]  # views: p changes with them
+    outer[0, 0] = inner[-1, 0] = 0.0
+    outer[1:, 0] = np.maximum(outer[1:, 0], min_radius)
+    inner[:-1, 0] = np.maximum(inner[:-1, 0], min_radius)
+    outer[:, 1] = np.maximum.accumulate(outer[:, 1])
+    inner[:, 1] = np.minimum(np.minimum.accumulate(inner[:, 1]), outer[-1, 1])
+    inner[:, 1] = np.maximum(inner[:, 1], outer[0, 1] + min_thickness)
+    for _ in range(4):
+        limit = _radius_at(outer, inner[:-1, 1], True) - min_thickness
+        inner[:-1, 0] = np.minimum(inner[:-1, 0], limit)
+        inside = (outer[1:, 1] >= inner[-1, 1]) & (outer[1:, 1] <= inner[0, 1])
+        need = _radius_at(inner, outer[1:, 1], False) + min_thickness
+        outer[1:, 0] = np.where(inside, np.maximum(outer[1:, 0], need), outer[1:, 0])
+    return p
+
+
+def hollow_valid(points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
+    """Whether the walls of ``points`` are z-monotone (outer up, inner
+    down), the inside bottom above the outside bottom, the inner rim no
+    higher than the outer, no radius negative (only the ends on the axis),
+    and at every height of the inner wall's range the inner radius at least
+    ``min_thickness`` (less 1%) inside the outer one (checked at both
+    walls' points: the gap is linear in between)."""
+    outer, inner = _chain_split(points, n_outer)
+    if np.any(np.diff(outer[:, 1]) < 0.0) or np.any(np.diff(inner[:, 1]) > 0.0):
+        return False
+    if inner[-1, 1] <= outer[0, 1] or inner[0, 1] > outer[-1, 1]:
+        return False
+    if np.any(outer[1:, 0] <= 0.0) or np.any(inner[:-1, 0] <= 0.0):
+        return False
+    if outer[0, 0] != 0.0 or inner[-1, 0] != 0.0:
+        return False
+    within = (outer[:, 1] >= inner[-1, 1]) & (outer[:, 1] <= inner[0, 1])
+    heights = np.concatenate([inner[:, 1], outer[within, 1]])
+    gap = _radius_at(outer, heights, True) - _radius_at(inner, heights, False)
+    return bool(np.all(gap >= 0.99 * min_thickness))
+
+
+def wall_rms_errors(points: np.ndarray, target: np.ndarray, n_outer: int) -> tuple[float, float]:
+    """``(outer, inner)``: the symmetric RMS distance between each wall of
+    ``points`` and the same wall of ``target`` (polylines, densely sampled),
+    relative to the target's height. The rim segment belongs to neither."""
+    height = float(np.ptp(np.asarray(target, dtype=np.float64).reshape(-1, 2)[:, 1]))
+    errors = []
+    for mine, theirs in zip(_chain_split(points, n_outer), _chain_split(target, n_outer), strict=True):
+        a, b = profile_curve(mine, "polyline"), profile_curve(theirs, "polyline")
+        d = np.concatenate([_distance_to_chain(a, b), _distance_to_chain(b, a)])
+        errors.append(float(np.sqrt(np.mean(d * d)) / height))
+    return errors[0], errors[1]
+
+
+def _colour_texture(size: int, phase: float) -> mi.TensorXf:
+    """A smooth colour pattern, different in each channel (red across,
+    green along, blue diagonally: a refracted ray's colour says where it
+    went), values 0.15-0.95."""
+    u = np.linspace(0.0, 1.0, size)
+    uu, vv = np.meshgrid(u, u)
+    red = 0.55 + 0.4 * np.sin(2 * np.pi * (1.5 * uu + phase))
+    green = 0.55 + 0.4 * np.cos(2 * np.pi * (1.2 * vv + 0.3 * phase))
+    blue = 0.55 + 0.4 * np.sin(2 * np.pi * (0.9 * (uu + vv) + 0.5 * phase))
+    return mi.TensorXf(np.stack([red, green, blue], axis=2).astype(np.float32))
+
+
+def _direction_texture(height: int = 64) -> mi.TensorXf:
+    """A latitude-longitude environment whose colour is an affine function
+    of the direction (red, green, blue along three axes): smooth everywhere,
+    seam and poles included, and every direction a different colour (a
+    refracted ray's colour says where it went)."""
+    v, u = np.meshgrid((np.arange(height) + 0.5) / height, (np.arange(2 * height) + 0.5) / (2 * height),
+                       indexing="ij")
+    # Mitsuba's envmap: u = atan2(x, -z) / 2 pi, v = acos(y) / pi (local y up)
+    theta, phi = np.pi * v, 2 * np.pi * u
+    x, y, z = np.sin(phi) * np.sin(theta), np.cos(theta), -np.cos(phi) * np.sin(theta)
+    colour = np.stack([0.5 + 0.4 * x, 0.5 + 0.4 * y, 0.5 + 0.4 * z], axis=2)
+    return mi.TensorXf(colour.astype(np.float32))
+
+
+def hollow_scene(points: np.ndarray, resolution: int = 32,
+                 views: tuple[tuple[float, float], ...] = GLASS_VIEWS[:2], max_depth: int = 8,
+                 lathe_id: str = "glass", integrator: str = "lathe_prb",
+                 lighting: str = "envmap") -> mi.Scene:
+    """A clear glass (``dielectric``, IOR 1.5) of the polyline ``points``
+    (about 2 units tall, base at z = 0), an emissive backdrop with a smooth
+    colour pattern behind it and a second one below it, and one square
+    camera per view ``(elevation in degrees, distance)`` on the side
+    opposite the backdrop, looking at the glass's middle (sensor ``k`` is
+    view ``k``). The lathe's reference is ``proxy`` (only exact integrators
+    render it)."""
+    transform = mi.ScalarTransform4f
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    middle = 0.5 * float(points[:, 1].max() + points[:, 1].min())
+
+    def light(phase):
+        texture = _colour_texture(64, phase)
+        return {"type": "area", "radiance": {"type": "bitmap", "data": texture, "raw": True,
+                                             "filter_type": "bilinear"}}
+
+    scene: dict[str, object] = {
+        "type": "scene",
+        "integrator": {"type": integrator, "max_depth": max_depth},
+        lathe_id: {"type": "lathe", "profile": profile_string(points), "kind": "polyline",
+                   "reference": "proxy", "bsdf": {"type": "dielectric", "int_ior": 1.5}},
+    }
+    if lighting == "envmap":
+        scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(_direction_texture().numpy()),
+                        "to_world": transform().rotate([0, 0, 1], 20).rotate([1, 0, 0], 60)}
+    else:
+        scene["backdrop"] = {"type": "rectangle", "emitter": light(0.1),
+                             "to_world": transform().translate([0, 3, middle]).rotate([1, 0, 0], 90)
+                             .scale([4.5, 4.5, 1])}
+        scene["floor"] = {"type": "rectangle", "emitter": light(0.6),
+                          "to_world": transform().translate([0, 0, -1.2]).scale([4.5, 4.5, 1])}
+    for k, (elevation, distance) in enumerate(views):
+        theta = math.radians(elevation)
+        origin = [0.0, -distance * math.cos(theta), middle + distance * math.sin(theta)]
+        scene[f"camera_{k}"] = {
+            "type": "perspective", "fov": 24,
+            "to_world": transform().look_at(origin=origin, target=[0.0, 0.0, middle], up=[0, 0, 1]),
+            "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": 4},
+        }
+    return mi.load_dict(scene)
+
+
+def _pool_indices(height: int, width: int, channels: int) -> list[mi.UInt32]:
+    """For average pooling by 2: one index array per offset in the 2 x 2
+    block, into the flat (height, width, channels) image, one entry per
+    pooled value."""
+    ys, xs, cs = np.meshgrid(np.arange(height // 2), np.arange(width // 2), np.arange(channels),
+                             indexing="ij")
+    return [mi.UInt32((((ys * 2 + dy) * width + xs * 2 + dx) * channels + cs).ravel())
+            for dy in range(2) for dx in range(2)]
+
+
+def _multiscale_loss(images, targets, levels: int) -> mi.Float:
+    """Mean squared difference of the images and the targets, and of their
+    averages over 2 x 2, 4 x 4, ... blocks (``levels`` in all), summed over
+    the levels and the views (the coarse terms give a wide basin around the
+    outlines)."""
+    loss = mi.Float(0.0)
+    for image, target in zip(images, targets, strict=True):
+        height, width, channels = image.shape
+        difference = (image - target).array
+        for level in range(levels):
+            if level:
+                indices = _pool_indices(height, width, channels)
+                difference = 0.25 * sum(dr.gather(mi.Float, difference, index) for index in indices)
+                height, width = height // 2, width // 2
+            loss += dr.mean(dr.square(difference))
+    return loss
+
+
+@dataclass
+class HollowResult:
+    """The recovered points; per iteration the loss, the per-wall profile
+    errors ``(outer, inner)``, whether the profile was valid, and the wall
+    time; the images of the targets, the start and the end."""
+
+    points: np.ndarray
+    n_outer: int
+    losses: list[float] = field(default_factory=list)
+    errors: list[tuple[float, float]] = field(default_factory=list)
+    valid: list[bool] = field(default_factory=list)
+    seconds: float = 0.0
+    start_errors: tuple[float, float] = (0.0, 0.0)
+    before: list[np.ndarray] = field(default_factory=list)
+    after: list[np.ndarray] = field(default_factory=list)
+    targets: list[np.ndarray] = field(default_factory=list)
+
+
+def _write(params, key: str, points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
+    """Set the points if they make a valid hollow profile (and the lathe
+    accepts them); False (nothing written) otherwise."""
+    if not hollow_valid(points, n_outer, min_thickness):
+        return False
+    try:
+        params[key] = mi.Float(points.ravel().astype(np.float32))
+        params.update()
+    except ProfileError:
+        return False
+    return True
+
+
+def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resolution: int = 32, spp: int = 8,
+                   learning_rate: float = 0.02, smoothness: float = 1e-3, spacing: float = 3e-3,
+                   views: tuple[tuple[float, float], ...] = GLASS_VIEWS[:2], max_depth: int = 8,
+                   seed: int = 0, start_jitter: float = 0.0, levels: int = 4,
+                   report: Callable[[int, float, tuple[float, float]], None] | None = None) -> HollowResult:
+    """Recover the hollow profile ``target`` (polyline, first ``n_outer``
+    points the outer wall) from renders of the clear glass in ``views``
+    (:func:`hollow_scene`; pixel samples of ``seed``), starting from
+    :func:`hollow_cylinder_like` with every coordinate moved by a normal
+    draw of ``start_jitter`` times the height (``seed``'s generator, then
+    projected). Adam with a step size decaying tenfold, the smoothness and
+    spacing regularisers of :mod:`lathe_shape.tools.inverse` decaying
+    hundredfold, and after each step the projection :func:`project_hollow`
+    (minimum radius 1%, minimum wall thickness 1% of the height), halving
+    the step while the profile is refused. ``report(iteration, loss,
+    (outer, inner))`` is called every iteration."""
+    from ..plugin.shape import scene_lathes  # needs a variant
+
+    clock = time.perf_counter()
+    target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
+    height = float(np.ptp(target[:, 1]))
+    min_radius, min_thickness = 0.01 * height, 0.01 * height
+    current = hollow_cylinder_like(target, n_outer)
+    if start_jitter > 0.0:
+        rng = np.random.default_rng(seed)
+        current = project_hollow(current + rng.normal(0.0, start_jitter * height, current.shape), n_outer,
+                                 min_radius, min_thickness)
+    assert hollow_valid(current, n_outer, min_thickness)
+    result = HollowResult(current, n_outer)
+    result.start_errors = wall_rms_errors(current, target, n_outer)
+
+    reference = hollow_scene(target, resolution, views, max_depth)
+    # The same seed for the targets and every render of the optimisation
+    # (see recover_profile): the loss is exactly zero at the hidden profile
+    targets = render_views(reference, spp, seed)
+    del reference
+    scene = hollow_scene(current, resolution, views, max_depth)
+    params = mi.traverse(scene)
+    key = points_key(params, scene_lathes(scene)[0])
+    result.before = [np.array(image) for image in render_views(scene, spp, seed)]
+    optimizer = mi.ad.Adam(lr=learning_rate)
+    optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
+    for iteration in range(iterations):
+        decay = 0.1 ** (iteration / max(iterations - 1, 1))
+        optimizer.set_learning_rate(learning_rate * decay)
+        params[key] = optimizer["points"]
+        params.update()
+        loss = decay ** 2 * (smoothness * _smoothness(optimizer["points"])
+                             + spacing * _spacing(optimizer["points"]))
+        loss += _multiscale_loss(render_views(scene, spp, seed, params), targets, levels)
+        dr.backward(loss)
+        optimizer.step()
+        proposal = project_hollow(np.array(optimizer["points"]), n_outer, min_radius, min_thickness)
+        step = 1.0
+        while not _write(params, key, current + step * (proposal - current), n_outer, min_thickness):
+            step *= 0.5
+            if step < 1e-3:
+                _write(params, key, current, n_outer, min_thickness)
+                break
+        current = np.array(params[key], dtype=np.float64).reshape(-1, 2)
+        optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
+        result.losses.append(float(np.array(dr.detach(loss)).ravel()[0]))
+        result.errors.append(wall_rms_errors(current, target, n_outer))
+        result.valid.append(hollow_valid(current, n_outer, min_thickness))
+        if report is not None:
+            report(iteration, result.losses[-1], result.errors[-1])
+    result.points = current
+    result.targets = [np.array(image) for image in targets]
+    result.after = [np.array(image) for image in render_views(scene, spp, seed)]
+    result.seconds = time.perf_counter() - clock
+    return result
+
+
+def plot_hollow_convergence(result: HollowResult, path: str, title: str = "") -> None:
+    """Loss and the two walls' profile errors per iteration (log scale) as
+    a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    errors = np.array(result.errors)
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    ax.semilogy(result.losses, label="image loss")
+    ax.semilogy(errors[:, 0], label="outer wall RMS error / height")
+    ax.semilogy(errors[:, 1], label="inner wall RMS error / height")
+    ax.axhline(0.01, color="gray", lw=0.8, ls="--", label="1% of height")
+    ax.set_xlabel("iteration")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
