@@ -109,27 +109,46 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
 
 
 def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
-                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, samples: tuple, active: mi.Bool
+                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool
                         ) -> tuple[mi.Vector3f, mi.Spectrum]:
     """The sampled direction ``wo_world`` and a factor of primal value 1
     carrying the derivative of the sample's weight, at the attached vertex
-    ``si`` (the detached draw ``bs`` from ``samples``). Eq. 28: a Dirac
-    delta's direction is drawn again with the same samples in the attached
-    frame, so that it turns with the incident direction and the normal;
-    its weight follows the attached lobe value (a Fresnel term: the value
-    times the pdf of the sample, over the detached lobe choice). Eq. 29:
-    any other lobe's direction stays put and its weight follows the
-    attached BSDF value."""
-    delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-    bs_att, weight_att = bsdf.sample(ctx, si, samples[0], samples[1], active & delta)
-    # Near grazing (and at the critical angle) a delta lobe's direction and
-    # Fresnel weight change without bound: their derivative there is left
-    # out (eq. 30), a bias measured in the README
-    grazing = delta & (dr.minimum(dr.abs(bs.wo.z), dr.abs(dr.detach(si.wi.z))) < GRAZING_COSINE)
-    wo_world = dr.select(delta & ~grazing, si.to_world(bs_att.wo), wo_world)
+    ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
+    a Dirac delta's direction is rebuilt here from the attached incident
+    direction and frame (eq. 28: a mirror reflection, or a refraction with
+    the sample's relative IOR) and its Fresnel weight from the attached
+    angle, the lobe choice held; any other lobe's direction stays put and
+    its weight follows the attached BSDF value (eq. 29). Near grazing and
+    near the critical angle these derivatives are unbounded and left out
+    (eq. 30)."""
+    delta = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
+    # The relative IOR of the transmission the lobe choice was made against
+    # (for a reflection, from a draw with transmission alone; none: a
+    # mirror, or total internal reflection, whose weight is constant)
+    only_transmission = mi.BSDFContext()
+    only_transmission.type_mask = mi.BSDFFlags.DeltaTransmission
+    transmitted, _ = bsdf.sample(only_transmission, dr.detach(si), 0.5, sample_2, delta & reflected)
+    eta_it = dr.select(reflected, transmitted.eta, bs.eta)
+    fresnel = delta & dr.select(reflected, transmitted.pdf > 0.0, True) & (eta_it != 1.0)
+    wi = si.wi
+    cos_i = mi.Frame3f.cos_theta(wi)
+    eta_ti = dr.rcp(eta_it)
+    cos_t = -dr.mulsign(dr.safe_sqrt(1.0 - dr.square(eta_ti) * (1.0 - dr.square(cos_i))), dr.detach(cos_i))
+    wo_local = dr.select(reflected, mi.reflect(wi), mi.refract(wi, cos_t, eta_ti))
+    cos_t_detached = dr.abs(dr.detach(cos_t))
+    grazing = delta & (dr.abs(dr.detach(cos_i)) < GRAZING_COSINE)
+    grazing |= delta & ~reflected & (cos_t_detached < GRAZING_COSINE)
+    critical = fresnel & (cos_t_detached < GRAZING_COSINE)
+    turned = dr.replace_grad(wo_world, si.to_world(wo_local))
+    wo_world = dr.select(delta & ~grazing, turned, wo_world)
+    # Eq. 28: F of the interface (IOR inside over outside) at the attached angle
+    eta = dr.select(dr.detach(cos_i) > 0.0, eta_it, eta_ti)
+    reflectance, _, _, _ = mi.fresnel(cos_i, eta)
     value = bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta)
-    value = dr.select(delta, weight_att * bs_att.pdf, value)
-    return wo_world, dr.select((dr.detach(value) != 0.0) & ~grazing, dr.relative_grad(value), 1.0)
+    value = dr.select(delta, mi.Spectrum(dr.select(reflected, reflectance, 1.0 - reflectance)), value)
+    held = grazing | critical | (delta & ~fresnel) | (dr.detach(value) == 0.0)
+    return wo_world, dr.select(held, 1.0, dr.relative_grad(value))
 
 
 @dataclasses.dataclass
@@ -299,10 +318,14 @@ class LathePRBIntegrator(RBIntegrator):
             si = attach_lathe_hits(geometry.lathes, ray, si)
         si_detached = dr.detach(si)
         valid_ray = path.valid_ray | (active & si.is_valid() & (depth == 0))
+        cos_in_geo = dr.dot(si_detached.n, -dr.detach(ray.d))
+        if attached:
+            # A hit within eq. 30's cosine of grazing slides without bound
+            # along its ray (eq. 23's slope n . d vanishes): held in place
+            si = dr.select(dr.abs(cos_in_geo) < GRAZING_COSINE * dr.norm(dr.detach(ray.d)), si_detached, si)
 
         # ------------ Eq. 11, incident side (eq. 25: decided detached) ------------
         active_next = active & si.is_valid() & (depth + 1 < max_depth)
-        cos_in_geo = dr.dot(si_detached.n, -dr.detach(ray.d))
         bad_in = active_next & (cos_in_geo * mi.Frame3f.cos_theta(si_detached.wi) <= 0.0)
         if check == "terminate":
             active_next &= ~bad_in
@@ -353,8 +376,7 @@ class LathePRBIntegrator(RBIntegrator):
                 active_next &= ~bad_out
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         if attached:
-            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, (sample_1, sample_2),
-                                                   active_next)
+            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next)
             bsdf_weight = bsdf_weight * factor
         β = β * bsdf_weight
         η = η * bs.eta
