@@ -31,10 +31,14 @@ def _command_name() -> str | None:
     return None
 
 
-if _command_name() and _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
+if _command_name() and _signal.getsignal(_signal.SIGINT) in (_signal.default_int_handler, _signal.SIG_IGN):
     # A command process: a watcher thread owns Ctrl-C from here on, also
     # while Mitsuba and Dr.Jit still import and while a render runs (their
-    # threads inherit the blocked SIGINT; see cli/interrupts.py).
+    # threads inherit the blocked SIGINT; see cli/interrupts.py). Also when
+    # started with SIGINT ignored (``cmd &`` in a script): Mitsuba's render
+    # would install its own handler over SIG_IGN anyway. (Blocked before
+    # the watcher's module imports: a Ctrl-C meanwhile waits for it.)
+    _signal.pthread_sigmask(_signal.SIG_BLOCK, {_signal.SIGINT})
     from .cli import interrupts as _interrupts
 
     _interrupts.install(_command_name())

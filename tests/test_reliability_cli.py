@@ -108,7 +108,8 @@ def check_interrupted(command: str, out, running: bool, latency: float, stderr: 
     effect: the process ends by the signal (the shell's status 130) or with
     Python's "KeyboardInterrupt" (status 1 inside the site import), having
     written nothing."""
-    if running and code in (-signal.SIGINT, 1) and "lathe_shape" not in stderr and not os.path.exists(out):
+    package = f"{os.sep}lathe_shape{os.sep}"  # (a traceback through the package's files)
+    if running and code in (-signal.SIGINT, 1) and package not in stderr and not os.path.exists(out):
         assert latency < 1.0 and (code == -signal.SIGINT or "KeyboardInterrupt" in stderr), stderr
         return
     if running:
