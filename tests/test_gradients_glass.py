@@ -18,7 +18,7 @@ import pytest
 
 from lathe_shape.plugin.shape import scene_lathes
 from lathe_shape.tools.diff_scenes import glass_scene
-from lathe_shape.tools.gradients import forward_gradient, glass_gradient
+from lathe_shape.tools.gradients import forward_gradient, glass_gradient, glass_outline_pixels
 
 #: (profile file, kind, flat index into its points, what it is). Measured
 #: at 48x48, 256 spp, seed 3, h = 0.1 profile units (0.5% of the height):
@@ -64,3 +64,16 @@ def test_backward_equals_forward_on_hollow_glass(wine_glass):
     backward = np.array(dr.grad(value))[[60, 21]]
     dr.disable_grad(value)
     np.testing.assert_allclose(backward, forward, rtol=2e-3, atol=1e-3)
+
+
+def test_outlines_seen_through_glass_carry_little(wine_glass):
+    """Pixels where refracted camera rays cross different numbers of walls
+    (an outline seen through the glass, which no pass edge-samples) carry
+    under 10% of the finite difference on the interior (measured: no such
+    pixel on the wine glass's interior at 48x48; 4 of 222 on the sundae
+    cup's, with 0% of its FD)."""
+    lathe = scene_lathes(wine_glass)[0]
+    check = glass_gradient(wine_glass, lathe, 60, h=0.1, spp=64, seed=3)
+    outline = glass_outline_pixels(wine_glass, lathe) & check.interior
+    share = np.abs(check.fd[outline]).sum() / np.abs(check.fd[check.interior]).sum()
+    assert share < 0.1

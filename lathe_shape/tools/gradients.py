@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from ..plugin.shape import LatheShape
 
 __all__ = ["GlassGradient", "GradientCheck", "check_gradient", "finite_difference", "forward_gradient",
-           "glass_gradient", "gradient_times", "pixel_classes", "points_key", "set_points", "wall_count"]
+           "glass_gradient", "glass_outline_pixels", "gradient_times", "pixel_classes", "points_key", "set_points", "wall_count"]
 
 
 def points_key(params: mi.SceneParameters, lathe: LatheShape) -> str:
@@ -246,3 +246,33 @@ def glass_gradient(scene: mi.Scene, lathe: LatheShape, index: int, h: float, spp
     walls = wall_count(scene, lathe)
     interior = _erode(_erode(walls > 0))
     return GlassGradient(ad, fd, interior, walls)
+
+
+def glass_outline_pixels(scene: mi.Scene, lathe: LatheShape, sub: int = 4, max_walls: int = 16) -> np.ndarray:
+    """Pixels where an outline is seen through the glass: camera rays at
+    ``sub x sub`` positions in the pixel, followed through ``lathe`` along
+    the refracted path (reflecting only where the light is totally
+    reflected), do not all cross the same number of walls."""
+    from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant
+
+    camera = scene.sensors()[0]
+    width, height = camera.film().crop_size()
+    jx, jy = np.meshgrid((np.arange(sub) + 0.5) / sub, (np.arange(sub) + 0.5) / sub)
+    py, px = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
+    x = (px[..., None, None] + jx) / width
+    y = (py[..., None, None] + jy) / height
+    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(x.ravel(), y.ravel()), mi.Point2f(0.5))
+    geometry = ExactSceneGeometry(scene)
+    ray = mi.Ray3f(ray)
+    count = np.zeros(dr.width(ray.o), dtype=np.int64)
+    active = mi.Bool(True)
+    ctx = mi.BSDFContext()
+    for _ in range(max_walls):
+        si = geometry.ray_intersect(ray, active)
+        mine = active & si.is_valid() & (si.shape == mi.ShapePtr(lathe))
+        count += np.array(mine, dtype=np.int64)
+        bs, _ = si.bsdf().sample(ctx, si, 1.0 - 1e-6, mi.Point2f(0.5), mine)
+        active = mine & (bs.pdf > 0)
+        ray = si.spawn_ray(si.to_world(bs.wo))
+    count = count.reshape(height, width, -1)
+    return count.min(axis=2) != count.max(axis=2)
