@@ -25,7 +25,8 @@ if TYPE_CHECKING:
     from ..plugin.shape import LatheShape
 
 __all__ = ["GlassGradient", "GradientCheck", "check_gradient", "finite_difference", "forward_gradient",
-           "glass_gradient", "glass_outline_pixels", "gradient_times", "pixel_classes", "points_key", "set_points", "wall_count"]
+           "glass_gradient", "glass_outline_pixels", "gradient_times", "pixel_classes", "points_key",
+           "set_points", "wall_count"]
 
 
 def points_key(params: mi.SceneParameters, lathe: LatheShape) -> str:
