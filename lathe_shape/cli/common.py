@@ -545,6 +545,7 @@ def output_folder(path: str | os.PathLike) -> str:
     try:
         with interrupts.on_interrupt(remove_probe):
             os.makedirs(path, exist_ok=True)
+            interrupts.watch_folder(path)
             try:
                 os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
             finally:

@@ -22,7 +22,9 @@ fraction of a second whatever the other threads do:
   the five files of ``lathe-compare``) is there whole or not at all;
 * ends the process's children (an ``ffmpeg`` writing an MP4);
 * runs the clean-ups registered with :func:`on_interrupt` (staging
-  folders of unfinished files, the turntable's folder lock);
+  folders of unfinished files, the turntable's folder lock) and removes
+  the process's temporary files in the output folders
+  (:func:`watch_folder`);
 * prints the command's one-line message and ends the process with status
   130 (``os._exit``: a running kernel cannot be cancelled).
 
@@ -59,6 +61,7 @@ __all__ = [
     "message",
     "on_interrupt",
     "set_prog",
+    "watch_folder",
     "writing",
 ]
 
@@ -78,6 +81,7 @@ _watcher: threading.Thread | None = None
 _prog = "lathe"
 _message: Callable[[], str] | None = None
 _cleanups: dict[int, Callable[[], None]] = {}
+_folders: set[str] = set()
 _tokens = itertools.count()
 
 
@@ -126,6 +130,29 @@ def on_interrupt(cleanup: Callable[[], None]) -> Iterator[None]:
         yield
     finally:
         _cleanups.pop(token, None)
+
+
+def watch_folder(folder: str | os.PathLike) -> None:
+    """On Ctrl-C, remove this process's temporary files in ``folder``: those
+    of :func:`~lathe_shape.tools.images.atomic_path` (``.NAME.PID.tmp.EXT``),
+    which writes outside a :class:`Staging` folder use (e.g. animations,
+    converted profiles)."""
+    _folders.add(os.path.abspath(os.fspath(folder)))
+
+
+def _remove_temporary_files() -> None:
+    marker = f".{os.getpid()}.tmp"
+    for folder in list(_folders):
+        try:
+            names = os.listdir(folder)
+        except OSError:
+            continue
+        for name in names:
+            if name.startswith(".") and marker in name:
+                try:
+                    os.remove(os.path.join(folder, name))
+                except OSError:
+                    pass
 
 
 def _register(cleanup: Callable[[], None]) -> int:
@@ -273,6 +300,7 @@ def _stop() -> None:
                 cleanup()
         except Exception:
             pass
+    _remove_temporary_files()
     _write_message()
     os._exit(130)
 
