@@ -94,7 +94,9 @@ def glass_scene(filename: str, kind: str = "polyline", lighting: str = "area", r
     scale = height / top
     scene: dict[str, object] = {
         "type": "scene",
-        "integrator": {"type": integrator, "max_depth": max_depth},
+        # No Russian roulette: its decisions would flip between the finite
+        # differences' renders (noise in the FD, none in the AD)
+        "integrator": {"type": integrator, "max_depth": max_depth, "rr_depth": max_depth},
         "camera": {"type": "perspective", "fov": 32,
                    "to_world": transform().look_at(origin=[0.0, -6.0, 0.8 * height],
                                                    target=[0.0, 0.0, 0.5 * height], up=[0, 0, 1]),
