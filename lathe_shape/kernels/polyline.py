@@ -78,9 +78,8 @@ from .common import (
     LatheGeometry,
     LatheHit,
     LatheRay,
-    box_rmin2,
     bvh_link,
-    child_box_bvh,
+    child_box_arrays,
     enter_child_box,
     opaque,
     to_unit_frame,
@@ -252,12 +251,9 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None,
 
     # Segment boxes in the (r, z) plane, padded for the joint tolerance
     lo_r = np.maximum(np.minimum(r0, r1) - pad, 0.0)
-    recs, links, n_nodes = child_box_bvh(
-        np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
-                  np.maximum(z0, z1) + pad], axis=1),
-        lambda b: [b[1] * b[1], box_rmin2(b[0]), b[2], b[3]],
-        lambda k, b: leaf_rec[k],
-    )
+    rows = child_box_arrays(np.stack([lo_r, np.maximum(r0, r1) + pad, np.minimum(z0, z1) - pad,
+                                      np.maximum(z0, z1) + pad], axis=1))
+    recs = _node_records(rows, leaf_rec)
 
     arc = np.concatenate([[0.0], np.cumsum(length)])
     total = float(arc[-1])
@@ -270,8 +266,8 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None,
 
     return PolylineData(
         nodes=buffer(recs),
-        links=opaque(np.asarray(links, dtype=np.uint32), mi.UInt32),
-        n_nodes=opaque(n_nodes, mi.UInt32),
+        links=opaque(rows.links, mi.UInt32),
+        n_nodes=opaque(rows.n_nodes, mi.UInt32),
         seg_geo=buffer(seg_geo),
         seg_sh=buffer(seg_sh),
         seg_arc=buffer(seg_arc),
@@ -284,6 +280,25 @@ def build_polyline_data(start, end, normal_start=None, normal_end=None,
         **frame,
         n_seg=len(p0),
     )
+
+
+def _child_records(b: np.ndarray) -> np.ndarray:
+    """``(rmax^2, rmin^2, zmin, zmax)`` of boxes ``b`` (rows ``(rmin, rmax,
+    zmin, zmax)``), rmin^2 as :func:`~.common.box_rmin2` (-1 at the axis)."""
+    return np.stack([b[:, 1] * b[:, 1], np.where(b[:, 0] > 0, b[:, 0] * b[:, 0], -1.0), b[:, 2], b[:, 3]],
+                    axis=1)
+
+
+def _node_records(rows, leaf_rec: np.ndarray) -> np.ndarray:
+    """float32 ``(4 * n_nodes, 8)``: the record of every stored node of
+    :func:`~.common.child_box_arrays`' copies (see :class:`PolylineData`'s
+    ``nodes``); float64 arithmetic, then one rounding, as per node."""
+    inner = rows.leaf < 0
+    bounds = rows.tree.bounds
+    recs = np.concatenate([_child_records(bounds[rows.first]), _child_records(bounds[rows.second])],
+                          axis=1).astype(np.float32)
+    recs[~inner] = leaf_rec[rows.leaf[~inner]]
+    return recs
 
 
 def _side_points(r0, z0, r1, z1, normal: np.ndarray, shift: float) -> np.ndarray:
@@ -303,17 +318,42 @@ def _side_points(r0, z0, r1, z1, normal: np.ndarray, shift: float) -> np.ndarray
     start = np.stack([r0, z0], axis=1)
     end = np.stack([r1, z1], axis=1)
     side = np.concatenate([start, end, start, end], axis=1)
-    starting_at = {tuple(p): k for k, p in enumerate(start)}
-    for k, p in enumerate(end):
-        j = starting_at.get(tuple(p))
-        bisector = normal[k] + normal[j] if j is not None else np.zeros(2)
-        norm = np.linalg.norm(bisector)
-        if norm > 1e-6:
-            q = p - shift * bisector / norm
-            q[0] = max(q[0], 0.0)
-            side[k, 6:] = q
-            side[j, 4:6] = q
+    k, j = _joints(start, end)
+    bisector = normal[k] + normal[j]
+    norm = np.sqrt(bisector[:, 0] * bisector[:, 0] + bisector[:, 1] * bisector[:, 1])
+    moved = norm > 1e-6
+    k, j, bisector, norm = k[moved], j[moved], bisector[moved], norm[moved]
+    q = end[k] - shift * bisector / norm[:, None]
+    q[:, 0] = np.maximum(q[:, 0], 0.0)
+    side[k, 6:] = q
+    side[j, 4:6] = q
     return side
+
+
+def _joints(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(k, j)``: the segments ``k`` whose end is the start of a segment
+    ``j`` (the last such ``j`` where starts repeat). A chain's segment
+    usually ends where the next one starts: that is checked for all at
+    once; the rest are looked up by value."""
+    m = len(start)
+    nxt = np.roll(np.arange(m), -1)
+    chained = (end == start[nxt]).all(axis=1)
+    order = np.lexsort((start[:, 1], start[:, 0]))
+    s = start[order]
+    if not np.any((s[1:] == s[:-1]).all(axis=1)):
+        # Starts are distinct: the chained segments' joints, and a search
+        # for the few others (a closed chain's first and last segment)
+        k, j = np.flatnonzero(chained), nxt[chained]
+        other = np.flatnonzero(~chained)
+        if len(other) <= 64:
+            found = [(i, np.flatnonzero((start == end[i]).all(axis=1))) for i in other]
+            k = np.concatenate([k, [i for i, f in found if len(f)]]).astype(np.int64)
+            j = np.concatenate([j, [f[0] for _, f in found if len(f)]]).astype(np.int64)
+            return k, j
+    starting_at = {tuple(p): i for i, p in enumerate(start.tolist())}
+    pairs = [(i, starting_at[p]) for i, p in enumerate(map(tuple, end.tolist())) if p in starting_at]
+    pairs = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    return pairs[:, 0], pairs[:, 1]
 
 
 def profile_polyline_data(profile: Profile, smooth: bool = True) -> PolylineData:
