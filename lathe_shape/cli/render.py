@@ -54,6 +54,7 @@ def render(args: argparse.Namespace) -> int:
     # Imported here so that --help works without touching the JIT backends.
     from ..tools.images import write_images
     from ..tools.scenes import integrator_name, scene_integrator
+    from .mesh_note import mesh_note
 
     check_render_options(args)
     scene = open_scene(args.scene, args.variant, args.defines, args.resolution)
@@ -69,6 +70,9 @@ def render(args: argparse.Namespace) -> int:
         f"variant {args.variant}, seed {args.seed}",
         flush=True,
     )
+    note = mesh_note(scene, integrator)
+    if note:
+        print(f"  {note}", flush=True)
     start = time.perf_counter()
     image, channels = render_film(scene, spp, args.seed, integrator)
     elapsed = time.perf_counter() - start

@@ -298,6 +298,11 @@ def describe(job: Job) -> None:
         f"seed {args.seed}{seeds}{threads}{denoised}",
         flush=True,
     )
+    from .mesh_note import mesh_note
+
+    note = mesh_note(job.turntable.scene, job.turntable.integrator)
+    if note:
+        print(f"  {note}", flush=True)
 
 
 def _expected(job: Job, frame: Frame) -> dict[str, object]:

@@ -68,6 +68,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .line_walk import start_walk
+from .media_check import refuse_media
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -207,6 +208,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
         """The scene's exact-lathe ray queries; follows the scene's edits
         (see :meth:`ExactSceneGeometry.for_scene`)."""
         geometry = ExactSceneGeometry.for_scene(scene, self._geometry)
+        refuse_media(geometry.lathes, "lathe_path")
         # Without lathes the geometry is the scene itself: not kept, as the
         # scene owns this integrator.
         self._geometry = geometry if geometry.lathes else None

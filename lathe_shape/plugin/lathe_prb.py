@@ -69,6 +69,7 @@ from mitsuba.ad.integrators.common import RBIntegrator, mis_weight, solid_angle_
 
 from .attached_hits import attach_lathe_hits, differentiable_lathes
 from .lathe_path import NORMAL_CHECKS, contradicts, with_geometric_frame
+from .media_check import refuse_media
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
@@ -190,6 +191,7 @@ class LathePRBIntegrator(RBIntegrator):
         """The scene's exact-lathe ray queries (kept while the scene's
         shapes stay the same, as ``lathe_path`` keeps them)."""
         current = ExactSceneGeometry.for_scene(scene, self._geometry)
+        refuse_media(current.lathes, "lathe_prb")
         self._geometry = current if current.lathes else None
         for lathe in differentiable_lathes(current.lathes):
             # Index maps built here, outside the traced loop (no new

@@ -99,6 +99,7 @@ import mitsuba as mi
 
 from .lathe_path import NORMAL_CHECKS, with_geometric_frame
 from .line_walk import start_walk
+from .media_check import refuse_media
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -216,6 +217,7 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
         """The exact-lathe ray queries of ``scene``, rebuilt when its shapes
         change (:meth:`ExactSceneGeometry.for_scene`)."""
         current = ExactSceneGeometry.for_scene(scene, self._geometry)
+        refuse_media(current.lathes, "lathe_whitted")
         # A scene without lathes is its own geometry; it owns this
         # integrator, so keeping it would make a reference cycle.
         self._geometry = None if not current.lathes else current

@@ -101,6 +101,7 @@ def register(variant: str | None = None) -> None:
     if variant is None:
         return
     check_llvm(variant)
+    from .dispersive_dielectric import register as register_dispersive
     from .lathe_path import register as register_path
     from .lathe_prb import register as register_prb
     from .lathe_whitted import register as register_whitted
@@ -110,6 +111,7 @@ def register(variant: str | None = None) -> None:
     register_path()
     register_whitted()
     register_prb()
+    register_dispersive()
 
 
 def on_variant_change(old: str | None, new: str | None) -> None:

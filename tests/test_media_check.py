@@ -1,0 +1,68 @@
+"""Issue 26, item 1: never silent. A lathe with a medium under an exact
+integrator is an error; a stock integrator on lathes is announced by the
+CLI."""
+
+from __future__ import annotations
+
+import mitsuba as mi
+import pytest
+from conftest import VARIANT
+
+from lathe_shape.cli import render
+from lathe_shape.cli.common import root_message
+
+SCENE = """<scene version="3.0.0">
+    <integrator type="{integrator}"/>
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0, -6, 1" target="0, 0, 1" up="0, 0, 1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+        <sampler type="independent"><integer name="sample_count" value="2"/></sampler>
+    </sensor>
+    <emitter type="constant"/>
+    <shape type="lathe" id="jar">
+        <string name="profile" value="0 0, 1 0, 1 2, 0 2"/>
+        <integer name="mesh_segments" value="48"/>
+        <bsdf type="dielectric"/>
+        {medium}
+    </shape>
+</scene>"""
+
+FOG = '<medium type="homogeneous" name="{side}" id="fog"/>'
+
+
+@pytest.mark.parametrize("integrator", ["lathe_path", "lathe_whitted", "lathe_prb"])
+@pytest.mark.parametrize("side", ["interior", "exterior"])
+def test_lathe_with_medium_is_an_error(integrator, side):
+    if integrator == "lathe_prb" and mi.is_polarized:
+        pytest.skip("lathe_prb only")
+    scene = mi.load_string(SCENE.format(integrator=integrator, medium=FOG.format(side=side)))
+    with pytest.raises(Exception) as caught:
+        mi.render(scene, spp=1)
+    message = root_message(caught.value)  # mi.render wraps the integrator's error
+    for part in ("lathe 'jar'", f"{side} medium", "'fog'", integrator, "use lathe_volpath"):
+        assert part in message.replace("Use", "use"), message
+
+
+def test_lathe_without_medium_renders():
+    scene = mi.load_string(SCENE.format(integrator="lathe_path", medium=""))
+    assert mi.render(scene, spp=1).shape[:2] == (8, 8)
+
+
+def run_render(tmp_path, capsys, integrator):
+    path = tmp_path / f"{integrator}.xml"
+    path.write_text(SCENE.format(integrator=integrator, medium=""))
+    assert render.main(["--variant", VARIANT, str(path), "-o", str(tmp_path / "out"), "--no-png"]) == 0
+    return capsys.readouterr().out
+
+
+def test_cli_names_mesh_rendering_under_a_stock_integrator(tmp_path, capsys):
+    out = run_render(tmp_path, capsys, "path")
+    notes = [line for line in out.splitlines() if "note:" in line]
+    assert len(notes) == 1, out
+    assert "1 lathe rendered as its 48-step reference mesh" in notes[0]
+    assert "lathe_path renders them exactly" in notes[0]
+
+
+def test_cli_is_quiet_under_lathe_path(tmp_path, capsys):
+    out = run_render(tmp_path, capsys, "lathe_path")
+    assert "note:" not in out and "reference mesh" not in out
