@@ -109,9 +109,19 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     return ds, em_weight
 
 
+def scene_lobes(scene: mi.Scene) -> tuple[bool, bool]:
+    """Whether any shape of ``scene`` has a BSDF with Dirac-delta lobes, and
+    any with other lobes (the differential pass traces only the code the
+    scene needs)."""
+    flags = [shape.bsdf().flags() for shape in scene.shapes() if shape.bsdf() is not None]
+    delta = any(mi.has_flag(f, mi.BSDFFlags.Delta) for f in flags)
+    smooth = any(mi.has_flag(f, mi.BSDFFlags.Smooth) for f in flags)
+    return delta, smooth
+
+
 def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
-                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool
-                        ) -> tuple[mi.Vector3f, mi.Spectrum]:
+                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool,
+                        lobes: tuple[bool, bool] = (True, True)) -> tuple[mi.Vector3f, mi.Spectrum]:
     """The sampled direction ``wo_world`` and a factor of primal value 1
     carrying the derivative of the sample's weight, at the attached vertex
     ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
@@ -121,7 +131,12 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     angle, the lobe choice held; any other lobe's direction stays put and
     its weight follows the attached BSDF value (eq. 29). Near grazing and
     near the critical angle these derivatives are unbounded and left out
-    (eq. 30)."""
+    (eq. 30). ``lobes``: whether the scene has delta lobes, and other
+    lobes (:func:`scene_lobes`)."""
+    has_delta, has_smooth = lobes
+    if not has_delta:
+        value = bsdf.eval(ctx, si, si.to_local(wo_world), active)
+        return wo_world, dr.select(dr.detach(value) == 0.0, 1.0, dr.relative_grad(value))
     delta = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
     reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
     # The relative IOR of the transmission the lobe choice was made against
@@ -146,8 +161,9 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     # Eq. 28: F of the interface (IOR inside over outside) at the attached angle
     eta = dr.select(dr.detach(cos_i) > 0.0, eta_it, eta_ti)
     reflectance, _, _, _ = mi.fresnel(cos_i, eta)
-    value = bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta)
-    value = dr.select(delta, mi.Spectrum(dr.select(reflected, reflectance, 1.0 - reflectance)), value)
+    value = mi.Spectrum(dr.select(reflected, reflectance, 1.0 - reflectance))
+    if has_smooth:
+        value = dr.select(delta, value, bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta))
     held = grazing | critical | (delta & ~fresnel) | (dr.detach(value) == 0.0)
     return wo_world, dr.select(held, 1.0, dr.relative_grad(value))
 
@@ -186,6 +202,7 @@ class LathePRBIntegrator(RBIntegrator):
             raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
         self._geometry = None
         self._differentiating = False
+        self._lobes = (True, True)
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
         """The scene's exact-lathe ray queries (kept while the scene's
@@ -287,6 +304,7 @@ class LathePRBIntegrator(RBIntegrator):
         holds every vertex for the reverse pass (memory grows with the path
         length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
         geometry = self.geometry(scene)
+        self._lobes = scene_lobes(scene)
         max_depth = min(self.max_depth, MAX_DIFFERENTIAL_DEPTH)
         with dr.resume_grad():
             path = self._start(scene, geometry, ray, active)
@@ -378,7 +396,8 @@ class LathePRBIntegrator(RBIntegrator):
                 active_next &= ~bad_out
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         if attached:
-            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next)
+            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
+                                                   self._lobes)
             bsdf_weight = bsdf_weight * factor
         β = β * bsdf_weight
         η = η * bs.eta
