@@ -3,7 +3,7 @@
 Renders the hidden profile (a 12-point polyline glass or an 8-control-point
 B-spline vase, ``lathe_shape.tools.inverse.HIDDEN_PROFILES``; or, with
 ``--kind hollow``, a clear 17-point hollow wine glass,
-``lathe_shape.tools.inverse_glass.HIDDEN_HOLLOW``) from two views,
+``lathe_shape.tools.inverse_glass.HIDDEN_HOLLOW``, three views) from two views,
 then starts from a cylinder with as many points and optimises the points
 with ``lathe_prb`` gradients (Adam, smoothness and even-spacing
 regularisers, projection onto valid profiles). Prints the loss and the profile RMS error (relative to the
@@ -89,7 +89,7 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     result = recover_hollow(target, n_outer, args.iterations, side, args.spp, args.learning_rate,
                             args.smoothness, args.spacing, seed=args.seed, report=report)
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
-                            f"hollow wine glass: {side}x{side}, {args.spp} spp, two views")
+                            f"hollow wine glass: {side}x{side}, {args.spp} spp, three views")
     paths = write_result_images(result, out)
     outer, inner = result.errors[-1]
     print(f"final profile RMS error: outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height "
