@@ -94,7 +94,7 @@ def check_llvm(variant: str | None = None) -> None:
 
 def register(variant: str | None = None) -> None:
     """Register the ``lathe`` shape and the ``lathe_path``,
-    ``lathe_whitted`` and ``lathe_prb`` integrators for the active Mitsuba
+    ``lathe_whitted``, ``lathe_prb`` and ``lathe_volpath`` integrators for the active Mitsuba
     variant."""
     if variant is None:
         variant = mi.variant()
@@ -104,6 +104,7 @@ def register(variant: str | None = None) -> None:
     from .dispersive_dielectric import register as register_dispersive
     from .lathe_path import register as register_path
     from .lathe_prb import register as register_prb
+    from .lathe_volpath import register as register_volpath
     from .lathe_whitted import register as register_whitted
     from .shape import register as register_shape
 
@@ -112,6 +113,7 @@ def register(variant: str | None = None) -> None:
     register_whitted()
     register_prb()
     register_dispersive()
+    register_volpath()
 
 
 def on_variant_change(old: str | None, new: str | None) -> None:
