@@ -77,3 +77,27 @@ def test_outlines_seen_through_glass_carry_little(wine_glass):
     outline = glass_outline_pixels(wine_glass, lathe) & check.interior
     share = np.abs(check.fd[outline]).sum() / np.abs(check.fd[check.interior]).sum()
     assert share < 0.1
+
+
+def test_environment_behind_glass_as_lathe_path_sees_it():
+    """A missed ray's ``wi`` (a world direction) is what the environment is
+    looked up with: the fallback policy's frame change left it garbled in
+    ``lathe_prb`` (a left-right ramp's blue channel read 0.5 for 0.27)."""
+    u = np.linspace(0.0, 1.0, 64)
+    ramp = np.stack([0.2 + 0.6 * np.tile(u, (32, 1)), np.full((32, 64), 0.5),
+                     0.2 + 0.6 * np.tile(np.linspace(0.0, 1.0, 32)[:, None], (1, 64))], -1)
+    images = []
+    for integrator in ("lathe_path", "lathe_prb"):
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": integrator, "max_depth": 6},
+            "sky": {"type": "envmap", "bitmap": mi.Bitmap(ramp.astype(np.float32))},
+            "camera": {"type": "perspective", "fov": 40,
+                       "to_world": mi.ScalarTransform4f().look_at([0, -5, 1], [0, 0, 1], [0, 0, 1]),
+                       "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}}},
+            "glass": {"type": "lathe", "filename": "scenes/wine_glass.csv",
+                      "to_world": mi.ScalarTransform4f().scale(1 / 9), "bsdf": {"type": "dielectric"}}})
+        images.append(np.array(mi.render(scene, spp=16, seed=0)))
+    # The image's outer columns see only the environment
+    for image in images:
+        np.testing.assert_allclose(image[:, :4].mean(axis=(0, 1)), [0.652, 0.5, 0.269], atol=2e-3)
+    np.testing.assert_allclose(images[1][:, :4], images[0][:, :4], atol=1e-5)

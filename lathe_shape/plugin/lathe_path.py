@@ -167,7 +167,10 @@ def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool,
     si = mi.SurfaceInteraction3f(si)
     wi_world = si.to_world(si.wi)
     si.sh_frame = dr.select(use, mi.Frame3f(si.n) if geo_frame is None else geo_frame, si.sh_frame)
-    si.wi = si.to_local(wi_world)
+    # Only where the frame changes: elsewhere wi stays bit for bit, and a
+    # missed ray's wi (a world direction, with no frame) stays what the
+    # environment is looked up with
+    si.wi = dr.select(use, si.to_local(wi_world), si.wi)
     return si
 
 
