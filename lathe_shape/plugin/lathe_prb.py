@@ -335,6 +335,9 @@ class LathePRBIntegrator(RBIntegrator):
         ray, depth, β, η, active = path.ray, path.depth, path.β, path.η, path.active
         si = geometry.ray_intersect(ray, active, depth == 0)
         if attached:
+            # Stored, so that the reverse pass reads the hit instead of
+            # tracing the ray again
+            dr.eval(si)
             si = attach_lathe_hits(geometry.lathes, ray, si)
         si_detached = dr.detach(si)
         valid_ray = path.valid_ray | (active & si.is_valid() & (depth == 0))
@@ -358,6 +361,8 @@ class LathePRBIntegrator(RBIntegrator):
         ds = mi.DirectionSample3f(scene, si=si_detached, ref=path.prev)
         pdf_em = scene.pdf_emitter_direction(path.prev, ds, ~path.bsdf_delta_prev)
         mis = mis_weight(path.bsdf_pdf_prev, pdf_em)
+        if attached:
+            dr.eval(mis)  # (as the hit)
         show = active & (depth > 0) if self.hide_emitters else active
         L = path.L + β * mis * ds.emitter.eval(si, show)
 
@@ -370,6 +375,8 @@ class LathePRBIntegrator(RBIntegrator):
             side_sh = mi.Frame3f.cos_theta(si_detached.to_local(ds.d)) * mi.Frame3f.cos_theta(si_detached.wi)
             active_em &= side_geo * side_sh > 0.0
         active_em &= ~geometry.ray_test(si_detached.spawn_ray_to(ds.p), active_em)
+        if attached:
+            dr.eval(active_em, ds, em_weight)  # (as the hit: not traced again)
         if attached:
             ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
         bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
@@ -396,6 +403,7 @@ class LathePRBIntegrator(RBIntegrator):
                 active_next &= ~bad_out
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         if attached:
+            dr.eval(bs, bsdf_weight, wo_world, sample_2, active_next)  # (as the hit)
             wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
                                                    self._lobes)
             bsdf_weight = bsdf_weight * factor
