@@ -47,7 +47,7 @@ lathe's outline as the camera sees it, that change is added by edge
 sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
 26-27); shadow boundaries and outlines seen through other surfaces are
 left out (their share is measured in the README, "Differentiable lathes"),
-as is a delta vertex within 0.1 cosine of grazing (eq. 30). Non-lathe
+as is a delta vertex within 0.2 cosine of grazing (eq. 30). Non-lathe
 shapes are not differentiated with respect to their geometry.
 
 Eq. 11 under differentiation (docs/method.md, eq. 25): each policy's decision
@@ -83,7 +83,7 @@ MAX_DIFFERENTIAL_DEPTH = 64
 
 #: Cosine (incident or outgoing, with the shading normal) below which a Dirac
 #: delta vertex's direction and weight are differentiated no more (eq. 30).
-GRAZING_COSINE = 0.1
+GRAZING_COSINE = 0.2
 
 
 def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
@@ -345,7 +345,11 @@ class LathePRBIntegrator(RBIntegrator):
         if attached:
             # A hit within eq. 30's cosine of grazing slides without bound
             # along its ray (eq. 23's slope n . d vanishes): held in place
-            si = dr.select(dr.abs(cos_in_geo) < GRAZING_COSINE * dr.norm(dr.detach(ray.d)), si_detached, si)
+            # where the ray came through a Dirac delta (where such slides
+            # compound along a glass's chain; a camera ray's or a diffuse
+            # bounce's hit moves as it must)
+            grazing = dr.abs(cos_in_geo) < GRAZING_COSINE * dr.norm(dr.detach(ray.d))
+            si = dr.select(grazing & path.bsdf_delta_prev & (depth > 0), si_detached, si)
 
         # ------------ Eq. 11, incident side (eq. 25: decided detached) ------------
         active_next = active & si.is_valid() & (depth + 1 < max_depth)
