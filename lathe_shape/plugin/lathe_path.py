@@ -69,7 +69,7 @@ import mitsuba as mi
 
 from .line_walk import start_walk
 from .media_check import refuse_media
-from .params import typed_property
+from .params import path_parameters, typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
@@ -181,16 +181,7 @@ class LathePathIntegrator(mi.SamplingIntegrator):
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         who = "lathe_path"
-        max_depth = typed_property(props, "max_depth", int, -1, who)
-        if max_depth < -1:
-            raise ValueError(
-                f"lathe_path: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}"
-            )
-        self.max_depth = 0xFFFFFFFF if max_depth == -1 else max_depth
-        self.rr_depth = typed_property(props, "rr_depth", int, 5, who)
-        if self.rr_depth <= 0:
-            raise ValueError(f"lathe_path: parameter 'rr_depth' must be > 0, got {self.rr_depth}")
-        self.hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
+        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, who)
         self.normal_check = typed_property(props, "normal_check", str, "fallback", who)
         if self.normal_check not in NORMAL_CHECKS:
             raise ValueError(

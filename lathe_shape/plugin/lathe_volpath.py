@@ -74,7 +74,7 @@ import mitsuba as mi
 from ..kernels.top_level import NO_LATHE
 from .lathe_path import mis_weight
 from .line_walk import LineWalk, start_walk
-from .params import typed_property
+from .params import path_parameters
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
@@ -100,16 +100,7 @@ class LatheVolpathIntegrator(mi.SamplingIntegrator):
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         who = "lathe_volpath"
-        max_depth = typed_property(props, "max_depth", int, -1, who)
-        if max_depth < -1:
-            raise ValueError(
-                f"{who}: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}"
-            )
-        self.max_depth = 0xFFFFFFFF if max_depth == -1 else max_depth
-        self.rr_depth = typed_property(props, "rr_depth", int, 5, who)
-        if self.rr_depth <= 0:
-            raise ValueError(f"{who}: parameter 'rr_depth' must be > 0, got {self.rr_depth}")
-        self.hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
+        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, who)
         self._geometry = None
 
     def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:

@@ -7,7 +7,7 @@ import mitsuba as mi
 import numpy as np
 
 __all__ = ["TRACEABLE_SCALES", "check_traceable_scale", "check_transform", "describe_lathe",
-           "transform_property", "typed_property"]
+           "path_parameters", "transform_property", "typed_property"]
 
 #: Range of a lathe's transform scale factors, and of its size in the world
 #: (profile size times scale), that the float32 exact kernels trace: beyond
@@ -36,6 +36,20 @@ def typed_property(props: mi.Properties, name: str, kind: type, default, who: st
         tag = {bool: "boolean", int: "integer", float: "float", str: "string"}[kind]
         raise ValueError(f"{who}: parameter '{name}' must be given as <{tag}>, got {value!r}")
     return value
+
+
+def path_parameters(props: mi.Properties, who: str) -> tuple[int, int, bool]:
+    """``max_depth`` (-1: infinite, returned as 0xFFFFFFFF), ``rr_depth``
+    and ``hide_emitters`` of a path tracer, as Mitsuba's ``path`` reads
+    them, with errors naming ``who``."""
+    max_depth = typed_property(props, "max_depth", int, -1, who)
+    if max_depth < -1:
+        raise ValueError(f"{who}: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}")
+    rr_depth = typed_property(props, "rr_depth", int, 5, who)
+    if rr_depth <= 0:
+        raise ValueError(f"{who}: parameter 'rr_depth' must be > 0, got {rr_depth}")
+    hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
+    return (0xFFFFFFFF if max_depth == -1 else max_depth), rr_depth, hide_emitters
 
 
 def transform_property(props: mi.Properties, name: str, who: str) -> np.ndarray:

@@ -26,8 +26,9 @@ from ..profiles import bspline as bs
 from .diff_scenes import lathe_scene
 from .gradients import points_key
 
-__all__ = ["HIDDEN_PROFILES", "InverseResult", "Stage", "cylinder_like", "plot_convergence", "profile_curve",
-           "profile_rms_error", "project_profile", "recover_profile", "render_views", "write_result_images"]
+__all__ = ["HIDDEN_PROFILES", "InverseResult", "Stage", "cylinder_like", "plot_convergence", "plot_losses",
+           "profile_curve", "profile_rms_error", "project_profile", "recover_profile", "render_views",
+           "write_result_images"]
 
 #: The hidden profiles of the examples and tests: a 12-point polyline glass
 #: (foot, waist, bowl, bevelled rim) and an 8-control-point B-spline vase
@@ -270,14 +271,21 @@ def recover_profile(target: np.ndarray, kind: str = "polyline", iterations: int 
 
 def plot_convergence(result: InverseResult, path: str, title: str = "") -> None:
     """Loss and profile error per iteration (log scale) as a PNG."""
+    plot_losses(result.losses, {"profile RMS error / height": result.errors}, path, title)
+
+
+def plot_losses(losses: list[float], errors: dict[str, list[float]], path: str, title: str = "") -> None:
+    """The image loss and each named error series per iteration (log
+    scale), with the 1% line, as a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    ax.semilogy(result.losses, label="image loss")
-    ax.semilogy(result.errors, label="profile RMS error / height")
+    ax.semilogy(losses, label="image loss")
+    for label, series in errors.items():
+        ax.semilogy(series, label=label)
     ax.axhline(0.01, color="gray", lw=0.8, ls="--", label="1% of height")
     ax.set_xlabel("iteration")
     ax.set_title(title, fontsize=9)

@@ -57,7 +57,7 @@ import numpy as np
 from ..profiles import ProfileError
 from .diff_scenes import profile_string
 from .gradients import points_key
-from .inverse import _distance_to_chain, _smoothness, _spacing, profile_curve, render_views
+from .inverse import _distance_to_chain, _smoothness, _spacing, plot_losses, profile_curve, render_views
 
 __all__ = ["GLASS_VIEWS", "HIDDEN_HOLLOW", "HollowResult", "hollow_cylinder_like", "hollow_scene",
            "hollow_valid", "plot_hollow_convergence", "project_hollow", "recover_hollow", "wall_rms_errors"]
@@ -450,21 +450,6 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
 def plot_hollow_convergence(result: HollowResult, path: str, title: str = "") -> None:
     """Loss and the two walls' profile errors per iteration (log scale) as
     a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     errors = np.array(result.errors)
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    ax.semilogy(result.losses, label="image loss")
-    ax.semilogy(errors[:, 0], label="outer wall RMS error / height")
-    ax.semilogy(errors[:, 1], label="inner wall RMS error / height")
-    ax.axhline(0.01, color="gray", lw=0.8, ls="--", label="1% of height")
-    ax.set_xlabel("iteration")
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    plot_losses(result.losses, {"outer wall RMS error / height": errors[:, 0],
+                                "inner wall RMS error / height": errors[:, 1]}, path, title)
