@@ -145,6 +145,7 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     only_transmission = mi.BSDFContext()
     only_transmission.type_mask = mi.BSDFFlags.DeltaTransmission
     transmitted, _ = bsdf.sample(only_transmission, dr.detach(si), 0.5, sample_2, delta & reflected)
+    dr.eval(transmitted)  # (stored, as the vertex's other detached values)
     eta_it = dr.select(reflected, transmitted.eta, bs.eta)
     fresnel = delta & dr.select(reflected, transmitted.pdf > 0.0, True) & (eta_it != 1.0)
     wi = si.wi

@@ -235,6 +235,11 @@ class ExactSceneGeometry:
                 si_group = group.ray_intersect(ray, dr.minimum(ray.maxt, si.t), active)
                 take = si_group.t < si.t
                 si, won = dr.select(take, si_group, si), won | take
+        if dr.grad_enabled(attached):
+            # The moving ray's interaction with the other shapes is
+            # differentiated from this hit: stored, so that a reverse pass
+            # reads it instead of tracing the ray again
+            dr.eval(pi, si, won)
         return _with_wi(dr.select(won, si, self._rest_interaction(attached, pi, active & ~won)), attached)
 
     def ray_intersect_walk(self, ray: mi.Ray3f, active: mi.Bool, walk: LineWalk,
