@@ -294,9 +294,12 @@ def _node_records(rows, leaf_rec: np.ndarray) -> np.ndarray:
     :func:`~.common.child_box_arrays`' copies (see :class:`PolylineData`'s
     ``nodes``); float64 arithmetic, then one rounding, as per node."""
     inner = rows.leaf < 0
-    bounds = rows.tree.bounds
-    recs = np.concatenate([_child_records(bounds[rows.first]), _child_records(bounds[rows.second])],
-                          axis=1).astype(np.float32)
+    # Each node's record once (the same float64 arithmetic and rounding
+    # per node), then gathered for the four copies' first and second child
+    per_node = _child_records(rows.tree.bounds).astype(np.float32)
+    recs = np.empty((len(rows.first), 8), dtype=np.float32)
+    recs[:, :4] = per_node[rows.first]
+    recs[:, 4:] = per_node[rows.second]
     recs[~inner] = leaf_rec[rows.leaf[~inner]]
     return recs
 
