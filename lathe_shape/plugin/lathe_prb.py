@@ -8,9 +8,10 @@
      - Description
    * - ``max_depth``, ``rr_depth``, ``hide_emitters``
      - integer, integer, boolean
-     - The path's longest depth (-1 = infinite; default 6), the depth where
-       Russian roulette starts (default 5), and whether directly visible
-       emitters are hidden (default false), as for ``lathe_path``.
+     - The path's longest depth (-1 = infinite; default 6; the
+       differential pass stops at 64 vertices), the depth where Russian
+       roulette starts (default 5), and whether directly visible emitters
+       are hidden (default false), as for ``lathe_path``.
    * - ``normal_check``
      - string
      - The eq. 11 policy where the interpolated shading normal contradicts

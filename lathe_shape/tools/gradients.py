@@ -148,7 +148,7 @@ def gradient_times(scene: mi.Scene, primal: mi.Integrator, spp: int, repeat: int
                    seed: int = 0) -> dict[str, list[float]]:
     """Wall times of the primal render with ``primal`` (e.g. ``lathe_path``)
     and of one backward pass of the scene's own integrator (``lathe_prb``:
-    ``render_backward``, with its primal replay, for the gradient of the
+    ``render_backward``, its attached pass and reverse pass, for the gradient of the
     image sum with respect to every lathe's points), interleaved, after one
     warm-up of each (which pays the JIT compilation)."""
     from ..plugin.shape import scene_lathes  # needs a variant
