@@ -101,3 +101,28 @@ def test_environment_behind_glass_as_lathe_path_sees_it():
     for image in images:
         np.testing.assert_allclose(image[:, :4].mean(axis=(0, 1)), [0.652, 0.5, 0.269], atol=2e-3)
     np.testing.assert_allclose(images[1][:, :4], images[0][:, :4], atol=1e-5)
+
+
+#: Under a smooth environment map (no backdrop): flat indices and what
+#: they are. Measured (48x48, 256 spp, h = 0.1): correlation without the 2%
+#: of pixels where AD and FD differ most 0.96-0.98 (all pixels: 0.32-0.55:
+#: paths leaving the glass near grazing carry a heavy tail).
+ENVIRONMENT_CASES = [(61, "outer bowl wall z"), (21, "inner wall at the rim z"),
+                     (19, "inner wall below the rim z")]
+
+
+@pytest.fixture(scope="module")
+def wine_glass_sky():
+    return glass_scene("scenes/wine_glass.csv", lighting="envmap", resolution=48)
+
+
+@pytest.mark.parametrize("index, what", ENVIRONMENT_CASES, ids=[c[1] for c in ENVIRONMENT_CASES])
+def test_glass_gradient_under_environment_light(wine_glass_sky, index, what):
+    """Paths that leave the glass into the environment keep their derivative
+    (a grazing-hit test once held every missed ray after glass in place:
+    AD was 0 where FD was 1-2 per pixel)."""
+    check = glass_gradient(wine_glass_sky, scene_lathes(wine_glass_sky)[0], index, h=0.1, spp=256, seed=3)
+    assert np.abs(check.fd[check.interior]).sum() > 1.0
+    assert check.correlation(trim=0.02) > 0.9, what
+    ad, fd = check.trimmed(trim=0.02)
+    assert 0.5 < np.abs(ad).sum() / np.abs(fd).sum() < 2.0, what

@@ -350,7 +350,8 @@ class LathePRBIntegrator(RBIntegrator):
             # where the ray came through a Dirac delta (where such slides
             # compound along a glass's chain; a camera ray's or a diffuse
             # bounce's hit moves as it must)
-            grazing = dr.abs(cos_in_geo) < GRAZING_COSINE * dr.norm(dr.detach(ray.d))
+            slope = dr.abs(cos_in_geo) * dr.rcp(dr.norm(dr.detach(ray.d)))
+            grazing = si_detached.is_valid() & (slope < GRAZING_COSINE)
             si = dr.select(grazing & path.bsdf_delta_prev & (depth > 0), si_detached, si)
 
         # ------------ Eq. 11, incident side (eq. 25: decided detached) ------------

@@ -79,6 +79,20 @@ def _smooth_texture(size: int = 128) -> mi.TensorXf:
     return mi.TensorXf(np.repeat(value[..., None], 3, axis=2).astype(np.float32))
 
 
+def _environment_texture(width: int = 256) -> mi.TensorXf:
+    """A smooth grey environment map (equirectangular, ``width x width/2``)
+    with whole periods around the azimuth, so that it is continuous across
+    the map's seam, and at the poles: 12 waves around, 3 from pole to pole
+    (the glass, a tenth of the view, refracts a few of them)."""
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(width // 2) + 0.5) / (width // 2)
+    # (the waves around fade out towards the poles, where all azimuths meet)
+    around = np.sin(2 * np.pi * 12 * u)
+    along = np.sin(np.pi * v) * np.cos(2 * np.pi * (3 * v + 0.1))
+    value = 0.5 + 0.4 * around[None, :] * along[:, None]
+    return mi.TensorXf(np.repeat(value[..., None], 3, axis=2).astype(np.float32))
+
+
 def glass_scene(filename: str, kind: str = "polyline", lighting: str = "area", resolution: int = 48,
                 height: float = 2.0, max_depth: int = 12, integrator: str = "lathe_prb") -> mi.Scene:
     """A clear glass (``dielectric``, IOR 1.5) of the profile file
@@ -113,5 +127,5 @@ def glass_scene(filename: str, kind: str = "polyline", lighting: str = "area", r
                              .scale([2.5 * height, 2.5 * height, 1]),
                              "emitter": {"type": "area", "radiance": texture}}
     else:
-        scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(_smooth_texture(64).numpy())}
+        scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(_environment_texture().numpy())}
     return mi.load_dict(scene)

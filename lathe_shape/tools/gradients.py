@@ -198,10 +198,22 @@ class GlassGradient:
     interior: np.ndarray
     walls: np.ndarray
 
-    def correlation(self, mask: np.ndarray | None = None) -> float:
-        """Per-pixel correlation of AD and FD on the interior (and ``mask``)."""
+    def correlation(self, mask: np.ndarray | None = None, trim: float = 0.0) -> float:
+        """Per-pixel correlation of AD and FD on the interior (and ``mask``),
+        leaving out the ``trim`` share of pixels where they differ most (the
+        heavy tail of paths through solid glass)."""
+        a, f = self.trimmed(mask, trim)
+        return float(np.corrcoef(a, f)[0, 1])
+
+    def trimmed(self, mask: np.ndarray | None = None, trim: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """AD and FD on the interior (and ``mask``) without the ``trim``
+        share of pixels where they differ most."""
         m = self.interior if mask is None else self.interior & mask
-        return float(np.corrcoef(self.ad[m], self.fd[m])[0, 1])
+        a, f = self.ad[m], self.fd[m]
+        if trim > 0.0:
+            keep = np.abs(a - f) <= np.quantile(np.abs(a - f), 1.0 - trim)
+            a, f = a[keep], f[keep]
+        return a, f
 
     def half_sums(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """``((AD, FD) left, (AD, FD) right)``: interior sums on either side
