@@ -84,19 +84,25 @@ def pixel_classes(scene: mi.Scene, lathe: LatheShape, sub: int = 4,
     pixels (dilated by one) see it in some rays only."""
     from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant
 
-    camera = scene.sensors()[sensor]
+    ray, width, height = _subpixel_rays(scene.sensors()[sensor], sub)
+    si = ExactSceneGeometry(scene).ray_intersect(ray, mi.Bool(True))
+    mine = np.array(si.is_valid() & (si.shape == mi.ShapePtr(lathe))).reshape(height, width, -1)
+    seg = np.where(mine, np.array(si.prim_index, dtype=np.int64).reshape(height, width, -1), -1)
+    one_segment = mine.all(axis=2) & (seg.min(axis=2) == seg.max(axis=2))
+    partial = mine.any(axis=2) & ~mine.all(axis=2)
+    return _erode(one_segment), ~_erode(~partial)
+
+
+def _subpixel_rays(camera: mi.Sensor, sub: int) -> tuple[mi.Ray3f, int, int]:
+    """Camera rays through ``sub x sub`` evenly spaced positions in every
+    pixel (pixel-major, row by row), and the film's width and height."""
     width, height = camera.film().crop_size()
     jx, jy = np.meshgrid((np.arange(sub) + 0.5) / sub, (np.arange(sub) + 0.5) / sub)
     py, px = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
     x = (px[..., None, None] + jx) / width
     y = (py[..., None, None] + jy) / height
     ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(x.ravel(), y.ravel()), mi.Point2f(0.5))
-    si = ExactSceneGeometry(scene).ray_intersect(mi.Ray3f(ray), mi.Bool(True))
-    mine = np.array(si.is_valid() & (si.shape == mi.ShapePtr(lathe))).reshape(height, width, -1)
-    seg = np.where(mine, np.array(si.prim_index, dtype=np.int64).reshape(height, width, -1), -1)
-    one_segment = mine.all(axis=2) & (seg.min(axis=2) == seg.max(axis=2))
-    partial = mine.any(axis=2) & ~mine.all(axis=2)
-    return _erode(one_segment), ~_erode(~partial)
+    return mi.Ray3f(ray), width, height
 
 
 def _erode(mask: np.ndarray) -> np.ndarray:
@@ -231,13 +237,8 @@ def wall_count(scene: mi.Scene, lathe: LatheShape, max_walls: int = 16) -> np.nd
     (straight on, unrefracted)."""
     from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant
 
-    camera = scene.sensors()[0]
-    width, height = camera.film().crop_size()
-    py, px = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
-    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f((px.ravel() + 0.5) / width, (py.ravel() + 0.5) / height),
-                               mi.Point2f(0.5))
+    ray, width, height = _subpixel_rays(scene.sensors()[0], 1)
     geometry = ExactSceneGeometry(scene)
-    ray = mi.Ray3f(ray)
     count = np.zeros(width * height, dtype=np.int64)
     active = mi.Bool(True)
     for _ in range(max_walls):
@@ -268,15 +269,8 @@ def glass_outline_pixels(scene: mi.Scene, lathe: LatheShape, sub: int = 4, max_w
     reflected), do not all cross the same number of walls."""
     from ..plugin.scene_geometry import ExactSceneGeometry  # needs a variant
 
-    camera = scene.sensors()[0]
-    width, height = camera.film().crop_size()
-    jx, jy = np.meshgrid((np.arange(sub) + 0.5) / sub, (np.arange(sub) + 0.5) / sub)
-    py, px = np.meshgrid(np.arange(height), np.arange(width), indexing="ij")
-    x = (px[..., None, None] + jx) / width
-    y = (py[..., None, None] + jy) / height
-    ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f(x.ravel(), y.ravel()), mi.Point2f(0.5))
+    ray, width, height = _subpixel_rays(scene.sensors()[0], sub)
     geometry = ExactSceneGeometry(scene)
-    ray = mi.Ray3f(ray)
     count = np.zeros(dr.width(ray.o), dtype=np.int64)
     active = mi.Bool(True)
     ctx = mi.BSDFContext()

@@ -54,10 +54,17 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..profiles import ProfileError
 from .diff_scenes import profile_string
 from .gradients import points_key
-from .inverse import _distance_to_chain, _smoothness, _spacing, plot_losses, profile_curve, render_views
+from .inverse import (
+    _distance_to_chain,
+    _smoothness,
+    _spacing,
+    _write_points,
+    plot_losses,
+    profile_curve,
+    render_views,
+)
 
 __all__ = ["GLASS_VIEWS", "HIDDEN_HOLLOW", "HollowResult", "hollow_cylinder_like", "hollow_scene",
            "hollow_valid", "plot_hollow_convergence", "project_hollow", "recover_hollow", "wall_rms_errors"]
@@ -364,14 +371,7 @@ class HollowResult:
 def _write(params, key: str, points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
     """Set the points if they make a valid hollow profile (and the lathe
     accepts them); False (nothing written) otherwise."""
-    if not hollow_valid(points, n_outer, min_thickness):
-        return False
-    try:
-        params[key] = mi.Float(points.ravel().astype(np.float32))
-        params.update()
-    except ProfileError:
-        return False
-    return True
+    return hollow_valid(points, n_outer, min_thickness) and _write_points(params, key, points)
 
 
 def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resolution: int = 32, spp: int = 8,
