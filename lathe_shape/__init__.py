@@ -21,7 +21,7 @@ import sys as _sys
 def _command_name() -> str | None:
     """``lathe-render`` etc. when this process is one of the package's
     commands (a console script, or ``python -m lathe_shape.cli.NAME``)."""
-    commands = ("render", "turntable", "compare", "profile")
+    commands = ("render", "turntable", "compare", "profile", "sweep")
     if _sys.argv and _os.path.basename(_sys.argv[0]) in {f"lathe-{c}" for c in commands}:
         return _os.path.basename(_sys.argv[0])
     argv = getattr(_sys, "orig_argv", [])

@@ -20,6 +20,9 @@ fraction of a second whatever the other threads do:
 * takes the commit lock (:func:`commit`: the renames of finished files
   into place), so that an output made of several files (an EXR and its PNG,
   the five files of ``lathe-compare``) is there whole or not at all;
+* runs the clean-ups registered with ``on_interrupt(..., first=True)``
+  (those that must act before the children end: a local Dask cluster
+  would otherwise restart its killed workers);
 * ends the process's children (an ``ffmpeg`` writing an MP4);
 * runs the clean-ups registered with :func:`on_interrupt` (staging
   folders of unfinished files, the turntable's folder lock) and removes
@@ -81,6 +84,7 @@ _watcher: threading.Thread | None = None
 _prog = "lathe"
 _message: Callable[[], str] | None = None
 _cleanups: dict[int, Callable[[], None]] = {}
+_first_cleanups: dict[int, Callable[[], None]] = {}
 _folders: set[str] = set()
 _tokens = itertools.count()
 
@@ -122,14 +126,19 @@ def message(make: Callable[[], str]) -> Iterator[None]:
 
 
 @contextmanager
-def on_interrupt(cleanup: Callable[[], None]) -> Iterator[None]:
+def on_interrupt(cleanup: Callable[[], None], first: bool = False) -> Iterator[None]:
     """Within the block, the watcher runs ``cleanup()`` before it ends the
-    process (clean-ups run newest first)."""
-    token = _register(cleanup)
+    process (clean-ups run newest first); with ``first``, before it ends
+    the process's children."""
+    if first:
+        token = next(_tokens)
+        _first_cleanups[token] = cleanup
+    else:
+        token = _register(cleanup)
     try:
         yield
     finally:
-        _cleanups.pop(token, None)
+        (_first_cleanups if first else _cleanups).pop(token, None)
 
 
 def watch_folder(folder: str | os.PathLike) -> None:
@@ -292,17 +301,23 @@ def _stop() -> None:
         while _writes_in_flight and (left := deadline - time.monotonic()) > 0:
             _state.wait(left)
     _commit_lock.acquire(timeout=COMMIT_WAIT_SECONDS)  # (kept: no commit after this)
+    _run_cleanups(_first_cleanups)
     _end_children()
-    for token in sorted(list(_cleanups), reverse=True):
-        cleanup = _cleanups.get(token)
+    _run_cleanups(_cleanups)
+    _remove_temporary_files()
+    _write_message()
+    os._exit(130)
+
+
+def _run_cleanups(cleanups: dict[int, Callable[[], None]]) -> None:
+    """Run ``cleanups``, newest first, ignoring their errors."""
+    for token in sorted(list(cleanups), reverse=True):
+        cleanup = cleanups.get(token)
         try:
             if cleanup is not None:
                 cleanup()
         except Exception:
             pass
-    _remove_temporary_files()
-    _write_message()
-    os._exit(130)
 
 
 def exit(status: int) -> None:  # noqa: A001 (the command's end)

@@ -21,6 +21,11 @@ Example::
     lathe-turntable scenes/wine_glass.xml -o turn --mode world --denoise -D integrator=lathe_path
     lathe-turntable scenes/wine_glass.xml -o turn --count 36 --frames 0:18   # machine 1
     lathe-turntable scenes/wine_glass.xml -o turn --count 36 --frames 18:36  # machine 2
+    lathe-turntable scenes/wine_glass.xml -o turn --count 36 --workers 2     # local Dask cluster
+    lathe-turntable scenes/wine_glass.xml -o turn --scheduler tcp://head:8786
+
+``--scheduler`` / ``--workers`` render the frames as tasks on a Dask cluster
+(:mod:`.cluster`; the optional extra ``lathe_shape[cluster]``).
 """
 
 from __future__ import annotations
@@ -108,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
         parser.add_argument(f"--{fmt}", action="store_true",
                             help=f"assemble all frames present into the output folder's turntable.{fmt}")
     parser.add_argument("--fps", type=float, default=12.0, help="GIF/MP4 frame rate (default: 12)")
+    from .cluster import add_cluster_options
+
+    add_cluster_options(parser, collect=True)
     return parser
 
 
@@ -488,12 +496,15 @@ def write_videos(job: Job) -> None:
 
 
 def turntable(args: argparse.Namespace) -> int:
+    from .cluster import check_cluster_options, client_args, render_job_on_cluster, uses_cluster
     from .folder_lock import FolderLock
 
-    job = open_job(args)
+    check_cluster_options(args)
+    job = open_job(client_args(args))
+    job.args = args  # (the frames' metadata name the variant asked for)
     with FolderLock(job.out_dir, job_identity(job), job.indices, PROG):
         describe(job)
-        status = render_job(job)
+        status = render_job_on_cluster(job, PROG) if uses_cluster(args) else render_job(job)
         if status == 0:
             write_videos(job)
     return status
