@@ -77,11 +77,14 @@ def test_axis_conversion():
 
 
 @pytest.mark.parametrize("text, message", [
-    ("lathe { linear_spline <0, 0>, <1, 1> }", "scene.pov:1: expected a literal number for the point count"),
+    # Issue 28: expressions are evaluated now (the old "expected a literal
+    # number" / "expressions are not evaluated" refusals were the bug).
+    ("lathe { linear_spline <0, 0>, <1, 1> }",
+     "scene.pov:1: expected the point count of the lathe, got a point"),
     ("lathe {\n 4, <0, 0>, <1, 0>, <0, 1> }",
      "scene.pov:2: the lathe announces 4 points but point 4 is missing"),
-    ("lathe { 3, <0, 0>, <R, 0>, <0, 1> }", "expected a literal number for point 2 of the lathe"),
-    ("sor { 4, <0, 0>, <1*2, 0>, <1, 1>, <0, 2> }", "expressions are not evaluated"),
+    ("lathe { 3, <0, 0>, <R, 0>, <0, 1> }", "scene.pov:1: unknown identifier 'R'"),
+    ("sor { 4, <0, 0>, <1/0, 0>, <1, 1>, <0, 2> }", "scene.pov:1: division by zero"),
     ("lathe { cubic_splin 4, <0, 0>, <1, 0>, <1, 1>, <0, 1> }", "unknown lathe spline type 'cubic_splin'"),
     ("\n\nlathe { 3, <0, 0>, <1, 0>, <0, 1>\n", "scene.pov:4: the lathe block opened at"),
     ("lathe { 3, <0, 0>, <1, 0, 2>, <0, 1> }", "point 2 of the lathe has 3 components, expected 2"),

@@ -1,16 +1,7 @@
-"""The literal ``lathe { ... }`` and ``sor { ... }`` blocks of a POV-Ray
-scene file, as profiles (numpy only).
-
-Recognised in a block: the spline type (``linear_spline``,
-``quadratic_spline``, ``cubic_spline``, ``bezier_spline``; lathes only,
-default linear), the point count, the points ``<r, h>`` (literal numbers),
-``open`` (sor), ``sturm`` (noted: the exact kernel needs no Sturm
-sequences) and the literal transforms ``scale``, ``rotate`` and ``translate``
-(composed in order, as POV-Ray does). Any other statement (``pigment``,
-``texture``, ``matrix``, ...) is skipped with a note. ``#declare NAME =`` (or
-``#local``) before a block names it. A block that cannot be read (a missing
-count or brace, fewer points than announced, an expression where a number
-must be) raises :class:`PovError` naming the file and line.
+"""The ``lathe`` and ``sor`` objects of a POV-Ray scene, as profiles
+placed in the world (the reading itself is :mod:`.pov_sdl`, a bounded SDL
+front end: expressions, declarations, conditionals, loops, macros,
+includes, object transforms and CSG).
 
 Kinds: ``linear_spline`` is a ``polyline``, ``quadratic_spline`` a
 ``quadratic``, ``cubic_spline`` a ``catmull_rom``, ``bezier_spline`` a
@@ -31,33 +22,18 @@ cos a, r sin a, h)``). So a block with POV-Ray transform ``M`` becomes a
 
 from __future__ import annotations
 
-import math
 import os
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .bspline import evaluate
-from .errors import ProfileError
+from .pov_sdl import Material, PovError, walk_scene
+from .pov_sdl.objects import SPLINE_KINDS
 from .spline_kinds import curve_form, kind_coefficients, to_bspline_controls
 
-__all__ = ["PovError", "PovBlock", "SPLINE_KINDS", "read_pov_blocks", "to_world", "is_open",
-           "lathe_snippet"]
-
-
-class PovError(ProfileError):
-    """A POV-Ray block that cannot be read; the message names file and line."""
-
-
-#: POV-Ray spline keywords and the profile kinds they become.
-SPLINE_KINDS = {"linear_spline": "polyline", "quadratic_spline": "quadratic",
-                "cubic_spline": "catmull_rom", "bezier_spline": "bezier"}
-
-#: Tokens: comments, strings, numbers, words (with #directives), symbols.
-_TOKEN = re.compile(r"""(?P<comment>//[^\n]*|/\*.*?\*/)|(?P<string>"(?:[^"\\\n]|\\.)*")
-    |(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(?P<word>\#?[A-Za-z_][A-Za-z0-9_]*)
-    |(?P<space>\s+)|(?P<symbol>.)""", re.VERBOSE | re.DOTALL)
+__all__ = ["PovError", "PovBlock", "SPLINE_KINDS", "read_pov_blocks", "read_pov_objects", "to_world",
+           "is_open", "lathe_snippet"]
 
 #: The y/z swap between POV-Ray's and Mitsuba's axes (module docstring).
 _SWAP = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
@@ -65,9 +41,10 @@ _SWAP = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]
 
 @dataclass
 class PovBlock:
-    """One ``lathe`` or ``sor`` block."""
+    """One ``lathe`` or ``sor`` object of a scene."""
 
-    #: The declared name, else ``<file stem>_<object><index>``.
+    #: The declared name (of the block or of the object it is declared in),
+    #: else ``<scene stem>_<object><index>``; unique within the scene.
     name: str
     #: ``lathe`` or ``sor``.
     object: str
@@ -78,214 +55,63 @@ class PovBlock:
     #: POV-Ray's ``open`` (sor), or a lathe curve that does not close.
     open_sheet: bool
     sturm: bool
-    #: 4x4 POV-Ray object-to-world transform of the literal transforms.
+    #: 4x4 POV-Ray object-to-world transform of the first placement.
     transform: np.ndarray
     #: ``file:line`` of the block's keyword.
     where: str
     #: Statements that were skipped, and other remarks.
     notes: list[str] = field(default_factory=list)
+    #: Every placement's transform (the first is :attr:`transform`).
+    transforms: list[np.ndarray] = field(default_factory=list)
+    #: The material of the first placement, if any.
+    material: Material | None = None
+    #: Why the object cannot be imported (then the rest may be empty).
+    error: str | None = None
 
 
-class _Tokens:
-    """(kind, text, line) tokens of a POV-Ray file, comments dropped."""
-
-    def __init__(self, text: str, path: str) -> None:
-        self.path, self.items, line = path, [], 1
-        for m in _TOKEN.finditer(text):
-            kind = m.lastgroup
-            if kind not in ("comment", "space"):
-                self.items.append((kind, m.group(), line))
-            line += m.group().count("\n")
-        self.pos, self.last_line = 0, line
-
-    def peek(self, ahead: int = 0) -> tuple[str, str, int]:
-        k = self.pos + ahead
-        return self.items[k] if k < len(self.items) else ("end", "", self.last_line)
-
-    def take(self) -> tuple[str, str, int]:
-        token = self.peek()
-        self.pos += 1
-        return token
-
-    def error(self, message: str, line: int | None = None) -> PovError:
-        return PovError(f"{self.path}:{line if line is not None else self.peek()[2]}: {message}")
-
-    def expect(self, text: str, what: str) -> None:
-        kind, got, line = self.take()
-        if got != text:
-            raise self.error(f"expected '{text}' {what}, got {got or 'the end of the file'!r}", line)
-
-    def number(self, what: str) -> float:
-        """A literal number, with an optional sign."""
-        sign = 1.0
-        while self.peek()[1] in "+-" and self.peek()[0] == "symbol":
-            sign *= -1.0 if self.take()[1] == "-" else 1.0
-        kind, text, line = self.take()
-        if kind != "number":
-            raise self.error(f"expected a literal number for {what}, got {text or 'the end'!r} "
-                             f"(expressions and identifiers are not evaluated)", line)
-        if self.peek()[0] == "symbol" and self.peek()[1] in "*/+-" and self.peek(1)[0] in ("number", "word"):
-            raise self.error(f"{what}: expressions are not evaluated; write a literal number", line)
-        return sign * float(text)
-
-    def vector(self, size: int, what: str) -> np.ndarray:
-        """``<a, b[, c]>`` with ``size`` literal numbers."""
-        self.expect("<", f"to open {what}")
-        values = [self.number(what)]
-        while self.peek()[1] == ",":
-            self.take()
-            values.append(self.number(what))
-        line = self.peek()[2]
-        self.expect(">", f"to close {what}")
-        if len(values) != size:
-            raise self.error(f"{what} has {len(values)} components, expected {size}", line)
-        return np.array(values)
+def read_pov_objects(path: str | os.PathLike,
+                     defines: dict | None = None) -> tuple[list[PovBlock], list[str]]:
+    """Every ``lathe`` and ``sor`` object of a scene, each read (or failed,
+    :attr:`PovBlock.error`) on its own, and the scene's notes. Raises
+    :class:`PovError` only when the file cannot be read."""
+    result = walk_scene(os.fspath(path), defines=defines)
+    blocks = []
+    for obj in result.objects:
+        b = obj.block
+        placements = obj.placements
+        first = placements[0] if placements else None
+        notes = list(b.notes) + list(obj.notes)
+        if first is not None:
+            notes += first.dropped
+        if len(placements) > 1:
+            notes.append(f"placed {len(placements)} times in the scene")
+        block = PovBlock(name=obj.name, object=b.object, kind=b.kind, points=b.points,
+                         open_sheet=b.open_sheet, sturm=b.sturm,
+                         transform=first.transform if first is not None else np.eye(4),
+                         where=b.where, notes=list(dict.fromkeys(notes)),
+                         transforms=[p.transform for p in placements],
+                         material=first.material if first is not None else None, error=obj.error)
+        if block.error is None and b.object == "lathe":
+            try:
+                block.open_sheet = is_open(b.kind, b.points, b.where)
+            except ValueError as e:
+                block.error = str(e)
+            if block.open_sheet:
+                block.notes.append("the curve does not close (nor has both ends on the axis): "
+                                   "written as an open sheet")
+        blocks.append(block)
+    return blocks, result.notes
 
 
 def read_pov_blocks(path: str | os.PathLike) -> list[PovBlock]:
-    """Every literal ``lathe`` and ``sor`` block of a POV-Ray file, in file
-    order (see the module docstring). Raises :class:`PovError`."""
-    path = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8", errors="replace") as f:
-            tokens = _Tokens(f.read(), path)
-    except OSError as e:
-        raise PovError(f"{path}: cannot read POV-Ray file ({e.strerror})") from None
-    stem = os.path.splitext(os.path.basename(path))[0]
-    blocks: list[PovBlock] = []
-    while tokens.peek()[0] != "end":
-        kind, text, line = tokens.take()
-        if kind == "word" and text in ("lathe", "sor") and tokens.peek()[1] == "{":
-            name = _declared_name(tokens.items, tokens.pos - 1)
-            name = name or f"{stem}_{text}{sum(b.object == text for b in blocks) + 1}"
-            blocks.append(_read_block(tokens, text, name, f"{path}:{line}"))
+    """Every ``lathe`` and ``sor`` object of a POV-Ray scene (see
+    :func:`read_pov_objects`); raises :class:`PovError` for the first one
+    that cannot be read."""
+    blocks, _ = read_pov_objects(path)
+    for block in blocks:
+        if block.error is not None:
+            raise PovError(block.error)
     return blocks
-
-
-def _declared_name(items: list, k: int) -> str | None:
-    """``NAME`` of ``#declare NAME =`` (or ``#local``) right before token ``k``."""
-    if k >= 3 and items[k - 1][1] == "=" and items[k - 3][1] in ("#declare", "#local"):
-        return items[k - 2][1]
-    return None
-
-
-def _read_block(tokens: _Tokens, obj: str, name: str, where: str) -> PovBlock:
-    tokens.expect("{", f"after '{obj}'")
-    kind = "sor"
-    if obj == "lathe":
-        kind = "polyline"
-        if tokens.peek()[1] in SPLINE_KINDS:
-            kind = SPLINE_KINDS[tokens.take()[1]]
-        elif tokens.peek()[0] == "word":
-            raise tokens.error(f"unknown lathe spline type '{tokens.peek()[1]}' (expected one of: "
-                               f"{', '.join(SPLINE_KINDS)}, or the literal point count)")
-    count_line = tokens.peek()[2]
-    count = tokens.number(f"the point count of the {obj}")
-    if count != int(count) or count < 2:
-        raise tokens.error(f"the point count of the {obj} must be a whole number >= 2, got {count:g}",
-                           count_line)
-    points = []
-    for k in range(int(count)):
-        if tokens.peek()[1] == ",":
-            tokens.take()
-        if tokens.peek()[1] != "<":
-            raise tokens.error(f"the {obj} announces {int(count)} points but point {k + 1} is missing "
-                               f"(got {tokens.peek()[1] or 'the end of the file'!r})")
-        points.append(tokens.vector(2, f"point {k + 1} of the {obj}"))
-    block = PovBlock(name=name, object=obj, kind=kind, points=np.array(points), open_sheet=False,
-                     sturm=False, transform=np.eye(4), where=where)
-    _read_modifiers(tokens, block)
-    if obj == "lathe":
-        block.open_sheet = is_open(kind, block.points, where)
-        if block.open_sheet:
-            block.notes.append("the curve does not close (nor has both ends on the axis): "
-                               "written as an open sheet")
-    return block
-
-
-def _read_modifiers(tokens: _Tokens, block: PovBlock) -> None:
-    """Everything after the points up to the block's closing brace."""
-    skipped: dict[str, int] = {}
-    while True:
-        kind, text, line = tokens.take()
-        if kind == "end":
-            raise tokens.error(f"the {block.object} block opened at {block.where} is not closed "
-                               f"(missing '}}')", line)
-        if text == "}":
-            break
-        if text == "open":
-            if block.object != "sor":
-                raise tokens.error("'open' is a sor modifier (a lathe is open when its curve is)", line)
-            block.open_sheet = True
-        elif text == "sturm":
-            block.sturm = True
-            block.notes.append("sturm: not needed (the exact kernel brackets every root)")
-        elif text in ("scale", "translate", "rotate"):
-            step = _transform(tokens, text)
-            block.transform = step @ block.transform
-            if text == "scale" and _singular(block.transform):
-                raise tokens.error(f"scale {_fmt_scale(step)}: the {block.object}'s "
-                                   f"transform becomes singular (a zero or vanishing scale "
-                                   f"component flattens the shape; Mitsuba cannot load it)", line)
-        elif text == ",":
-            continue
-        else:
-            skipped.setdefault(text, line)
-            _skip_statement(tokens)
-    block.notes += [f"line {line}: '{word}' ignored" for word, line in skipped.items()]
-
-
-def _skip_statement(tokens: _Tokens) -> None:
-    """Skip one statement's arguments: a braced body, or values up to the
-    next word or brace."""
-    if tokens.peek()[1] == "{":
-        depth = 0
-        while True:
-            kind, text, line = tokens.take()
-            if kind == "end":
-                raise tokens.error("unbalanced braces", line)
-            depth += {"{": 1, "}": -1}.get(text, 0)
-            if depth == 0:
-                return
-    while tokens.peek()[0] in ("number", "symbol", "string") and tokens.peek()[1] not in "{}":
-        tokens.take()
-
-
-def _singular(m: np.ndarray) -> bool:
-    """Whether the linear part of ``m`` is singular or too nearly so for a
-    lathe's ``to_world``: the test of ``plugin.params.check_transform``
-    (determinant relative to the product of the column lengths), so that
-    what is written here loads."""
-    linear = m[:3, :3]
-    if not np.isfinite(linear).all():
-        return True
-    return abs(np.linalg.det(linear)) <= 1e-9 * float(np.prod(np.linalg.norm(linear, axis=0)))
-
-
-def _fmt_scale(m: np.ndarray) -> str:
-    """The factors of the scale matrix ``m``, ``<x, y, z>``."""
-    return "<" + ", ".join(f"{v:g}" for v in np.diag(m)[:3]) + ">"
-
-
-def _transform(tokens: _Tokens, op: str) -> np.ndarray:
-    """The 4x4 matrix of a literal ``scale``, ``translate`` or ``rotate``."""
-    if op == "scale" and tokens.peek()[1] != "<":
-        v = np.full(3, tokens.number("scale"))
-    else:
-        v = tokens.vector(3, op)
-    m = np.eye(4)
-    if op == "scale":
-        m[:3, :3] = np.diag(v)
-    elif op == "translate":
-        m[:3, 3] = v
-    else:  # about x, then y, then z, in degrees
-        for axis, angle in enumerate(np.radians(v)):
-            c, s = math.cos(angle), math.sin(angle)
-            i, j = [(1, 2), (2, 0), (0, 1)][axis]
-            r = np.eye(4)
-            r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
-            m = r @ m
-    return m
 
 
 def is_open(kind: str, points: np.ndarray, where: str) -> bool:
