@@ -45,9 +45,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--open", action="store_true",
                         help="the profile is a single open sheet (default: the CSV's '# open:' line)")
     parser.add_argument("--from-pov", metavar="FILE.pov",
-                        help="import the literal lathe and sor blocks of a POV-Ray file: writes "
-                             "NAME.csv and a Mitsuba <shape> snippet NAME.xml per block into -o DIR "
-                             "(default: next to FILE.pov)")
+                        help="import every lathe and sor object of a POV-Ray scene (its #declare, "
+                             "#if, #while, macros, #include and transforms evaluated): writes "
+                             "NAME.csv and a Mitsuba <shape> snippet NAME.xml per object into -o DIR "
+                             "(default: next to FILE.pov); one line per object; exit status 1 if "
+                             "any object could not be imported")
+    parser.add_argument("--scene", metavar="OUT.xml",
+                        help="with --from-pov: also write a complete Mitsuba scene (camera, light, "
+                             "floor, materials) of the imported objects, for lathe-render")
+    parser.add_argument("--declare", action="append", default=[], metavar="NAME=VALUE",
+                        help="with --from-pov: a number POV-Ray's scene sees as declared (as "
+                             "POV-Ray's Declare=NAME=VALUE, e.g. frame_number=11); repeatable")
+    parser.add_argument("--strict-curves", action="store_true",
+                        help="with --from-pov: refuse a curve that crosses itself (default: a "
+                             "small loop, which POV-Ray renders, is written as a separate closed "
+                             "curve, with a warning)")
     parser.add_argument("--crease-angle", type=float, default=30.0,
                         help="crease angle in degrees (default 30)")
     parser.add_argument("--to-polyline", type=int, metavar="N",
@@ -151,7 +163,8 @@ def check_or_convert(args: argparse.Namespace) -> int:
     if (args.input is None) == (args.from_pov is None):
         raise CliError("give a profile file, or --from-pov FILE.pov (not both)")
     if args.from_pov is not None:
-        return import_pov(args.from_pov, args.output)
+        return import_pov(args.from_pov, args.output, scene=args.scene, declares=args.declare,
+                          strict_curves=args.strict_curves)
     points, sharp, labels = read_points(args.input)
     declared = read_profile_options(args.input)
     kind = args.kind or declared.get("kind", "polyline")
@@ -174,38 +187,158 @@ def check_or_convert(args: argparse.Namespace) -> int:
     return convert(args, spline)
 
 
-def import_pov(path: str, output: str | None) -> int:
+#: Most placements of one object written (a declared object may be placed
+#: by a loop thousands of times).
+MAX_PLACEMENTS = 64
+
+
+def _declares(items: list[str]) -> dict:
+    defines = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name.isidentifier():
+                raise ValueError
+            defines[name] = float(value)
+        except ValueError:
+            raise CliError(f"--declare {item!r}: expected NAME=NUMBER") from None
+    return defines
+
+
+def import_pov(path: str, output: str | None, scene: str | None = None,
+               declares: list[str] | None = None, strict_curves: bool = False) -> int:
     """``--from-pov``: one profile CSV and one ``<shape>`` snippet per
-    ``lathe``/``sor`` block, each validated as a profile first."""
+    ``lathe``/``sor`` object, each validated as a profile first; every
+    object imports or fails on its own (one line each); 1 if any failed."""
     import numpy as np
 
-    from ..profiles import write_profile_csv
-    from ..profiles.pov import lathe_snippet, read_pov_blocks
-    from ..profiles.text import PointLabels
-    from ..surfaces import make_surface
+    from ..profiles.pov import read_pov_objects, to_world
+    from ..profiles.pov_sdl.objects import _singular
+    from ..tools.pov_scene import SceneShape, relative_csv, scene_xml
     from .common import output_folder
 
-    blocks = read_pov_blocks(path)
+    if scene is not None and not scene.endswith(".xml"):
+        raise CliError(f"--scene {scene}: the scene file must end in .xml")
+    blocks, scene_notes = read_pov_objects(path, _declares(declares or []))
     if not blocks:
-        raise CliError(f"{path}: no literal lathe or sor block found")
-    folder = output_folder(output if output is not None else os.path.dirname(path) or ".")
-    for block in blocks:
-        source = f"{block.where}: {block.object} '{block.name}'"
-        labels = PointLabels.counting(source, len(block.points))
-        make_surface(block.kind, block.points, np.zeros(len(block.points), bool), labels, source,
-                     open_sheet=block.open_sheet)
-        csv = write_profile_csv(os.path.join(folder, f"{block.name}.csv"), block.points,
-                                header=f"{block.object} '{block.name}' of {block.where}",
-                                options={"kind": block.kind, "open": block.open_sheet})
-        xml = os.path.join(folder, f"{block.name}.xml")
-        with open(xml, "w", encoding="utf-8") as f:
-            f.write(lathe_snippet(block, os.path.basename(csv)))
-        form = "open sheet" if block.open_sheet else "solid"
-        print(f"{block.where}: {block.object} '{block.name}': {block.kind}, {len(block.points)} points, "
-              f"{form} -> {csv}, {xml}")
-        for note in block.notes:
+        for note in scene_notes[:20]:
             print(f"  note: {note}", file=sys.stderr)
-    return 0
+        raise CliError(f"{path}: no lathe or sor object found")
+    folder = None
+    failed = 0
+    shapes: list[SceneShape] = []
+    for block in blocks:
+        head = f"{block.where}: {block.object} '{block.name}'"
+        try:
+            if block.error is not None:
+                raise ValueError(block.error)
+            for m in block.transforms or [block.transform]:
+                if _singular(m):
+                    raise ValueError(f"{block.where}: the {block.object}'s transform in the scene is "
+                                     f"singular (a zero scale flattens it; Mitsuba cannot load it)")
+            kind, points, loops, notes = _checked_curve(block, strict_curves)
+        except (ValueError, RuntimeError) as e:
+            reason = str(e)
+            if reason.startswith(block.where + ": "):
+                reason = reason[len(block.where) + 2:]
+            print(f"{head}: not imported: {reason}")
+            failed += 1
+            continue
+        if folder is None:
+            folder = output_folder(output if output is not None else os.path.dirname(path) or ".")
+        written, shape = _write_object(block, folder, kind, points, loops)
+        transforms = block.transforms or [block.transform]
+        placed = transforms[:MAX_PLACEMENTS]
+        form = "open sheet" if block.open_sheet else "solid"
+        more = f", {len(transforms)} placements" if len(transforms) > 1 else ""
+        print(f"{head}: {kind}, {len(points)} points, {form}{more} -> {', '.join(written)}")
+        if len(transforms) > MAX_PLACEMENTS:
+            notes.append(f"placed {len(transforms)} times: the first {MAX_PLACEMENTS} are written")
+        for note in block.notes + notes:
+            print(f"  note: {note}", file=sys.stderr)
+        for name, csv, k, pts, open_sheet in shape:
+            shapes.append(SceneShape(name, csv, k, open_sheet, [to_world(m) for m in placed], pts,
+                                     block.material, comment=f"{block.object} '{block.name}' of "
+                                                             f"{block.where}"))
+    for note in scene_notes[:20]:
+        print(f"  note: {note}", file=sys.stderr)
+    if len(scene_notes) > 20:
+        print(f"  note: ... and {len(scene_notes) - 20} more notes on the scene", file=sys.stderr)
+    if scene is not None and shapes:
+        scene_folder = os.path.dirname(os.path.abspath(scene))
+        os.makedirs(scene_folder, exist_ok=True)
+        for s in shapes:
+            s.csv = relative_csv(s.csv, scene)
+        with open(scene, "w", encoding="utf-8") as f:
+            f.write(scene_xml(shapes, path))
+        print(f"wrote the scene {scene} ({sum(len(s.to_worlds) for s in shapes)} shapes): "
+              f"lathe-render {scene}")
+    if failed:
+        print(f"{path}: {failed} of {len(blocks)} objects not imported", file=sys.stderr)
+    del np
+    return 1 if failed else 0
+
+
+def _checked_curve(block, strict_curves: bool):
+    """``(kind, points, loops, notes)``: the block's curve validated as a
+    profile; a curve crossing itself in a small loop (which POV-Ray renders)
+    is split into the rest and the loop (:mod:`..profiles.pov_loops`),
+    unless ``strict_curves``. Raises ValueError."""
+    import numpy as np
+
+    from ..profiles.pov_loops import remove_small_loops
+    from ..profiles.text import PointLabels
+    from ..surfaces import make_surface
+
+    def check(kind, points, open_sheet, source):
+        labels = PointLabels.counting(source, len(points))
+        make_surface(kind, points, np.zeros(len(points), bool), labels, source, open_sheet=open_sheet)
+
+    source = f"{block.where}: {block.object} '{block.name}'"
+    try:
+        check(block.kind, block.points, block.open_sheet, source)
+        return block.kind, block.points, [], []
+    except ValueError as e:
+        if strict_curves or "intersects itself" not in str(e):
+            raise
+        first = e
+    kind, points, notes, loops = remove_small_loops(block.kind, block.points, source)
+    if not notes:
+        raise first
+    try:
+        check(kind, points, block.open_sheet, source)
+        for k, loop in enumerate(loops):
+            check("bezier", loop, False, f"{source}: loop {k + 1}")
+    except ValueError as e:
+        raise ValueError(f"{first} (cutting its small loops off did not help: {e})") from None
+    return kind, points, loops, [f"warning: {n}" for n in notes]
+
+
+def _write_object(block, folder: str, kind: str, points, loops):
+    """NAME.csv (+ NAME_loopK.csv) and NAME.xml; the files written and the
+    (id, csv, kind, points, open) of each profile."""
+    from ..profiles import write_profile_csv
+    from ..profiles.pov import lathe_snippet
+
+    profiles = [(block.name, kind, points, block.open_sheet)]
+    profiles += [(f"{block.name}_loop{k + 1}", "bezier", loop, False) for k, loop in enumerate(loops)]
+    written, shapes, snippets = [], [], []
+    transforms = (block.transforms or [block.transform])[:MAX_PLACEMENTS]
+    for name, k, pts, open_sheet in profiles:
+        csv = write_profile_csv(os.path.join(folder, f"{name}.csv"), pts,
+                                header=f"{block.object} '{block.name}' of {block.where}",
+                                options={"kind": k, "open": open_sheet})
+        written.append(csv)
+        shapes.append((name, csv, k, pts, open_sheet))
+        for j, m in enumerate(transforms):
+            snippets.append(lathe_snippet(block, os.path.basename(csv), transform=m,
+                                          shape_id=name if j == 0 else f"{name}__{j + 1}", kind=k,
+                                          open_sheet=open_sheet))
+    xml = os.path.join(folder, f"{block.name}.xml")
+    with open(xml, "w", encoding="utf-8") as f:
+        f.write("".join(snippets))
+    written.append(xml)
+    return written, shapes
 
 
 def main(argv: list[str] | None = None) -> int:

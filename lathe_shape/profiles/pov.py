@@ -83,8 +83,6 @@ def read_pov_objects(path: str | os.PathLike,
         notes = list(b.notes) + list(obj.notes)
         if first is not None:
             notes += first.dropped
-        if len(placements) > 1:
-            notes.append(f"placed {len(placements)} times in the scene")
         block = PovBlock(name=obj.name, object=b.object, kind=b.kind, points=b.points,
                          open_sheet=b.open_sheet, sturm=b.sturm,
                          transform=first.transform if first is not None else np.eye(4),
@@ -135,16 +133,23 @@ def to_world(transform: np.ndarray) -> np.ndarray:
     return _SWAP @ np.asarray(transform, dtype=np.float64) @ _SWAP
 
 
-def lathe_snippet(block: PovBlock, filename: str) -> str:
+def lathe_snippet(block: PovBlock, filename: str, transform: np.ndarray | None = None,
+                  shape_id: str | None = None, kind: str | None = None,
+                  open_sheet: bool | None = None) -> str:
     """A Mitsuba ``<shape type="lathe">`` element for ``block``, whose
-    profile CSV is ``filename`` (relative to the scene file)."""
-    matrix = " ".join(f"{v:.9g}" for v in to_world(block.transform).ravel())
+    profile CSV is ``filename`` (relative to the scene file); by default at
+    the block's first placement, with its id, kind and form."""
+    transform = block.transform if transform is None else transform
+    shape_id = block.name if shape_id is None else shape_id
+    kind = block.kind if kind is None else kind
+    open_sheet = block.open_sheet if open_sheet is None else open_sheet
+    matrix = " ".join(f"{v:.9g}" for v in to_world(transform).ravel())
     return (f"<!-- POV-Ray {block.object} '{block.name}' of {block.where}; POV-Ray (x, y, z) is "
             f"Mitsuba (x, z, y) (left-handed y-up to right-handed z-up). Add a <bsdf>. -->\n"
-            f'<shape type="lathe" id="{block.name}">\n'
+            f'<shape type="lathe" id="{shape_id}">\n'
             f'    <string name="filename" value="{filename}"/>\n'
-            f'    <string name="kind" value="{block.kind}"/>\n'
-            f'    <boolean name="open" value="{str(block.open_sheet).lower()}"/>\n'
+            f'    <string name="kind" value="{kind}"/>\n'
+            f'    <boolean name="open" value="{str(open_sheet).lower()}"/>\n'
             f'    <transform name="to_world">\n'
             f'        <matrix value="{matrix}"/>\n'
             f"    </transform>\n"
