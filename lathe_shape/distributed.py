@@ -98,6 +98,9 @@ CACHE_SIZE = 2
 POLL_SECONDS = 0.05
 #: Tries of a render that raises: the first and one retry.
 TRIES = 2
+#: Dask settings of the workers of a local cluster (remote workers: set
+#: ``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False`` where they start).
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 #: Environment variable of the tests' fault injection on the workers:
 #: ``delay=SECONDS`` (before every render), ``fail=K`` (frame or variation K
 #: raises a scene error every time), ``log=PATH`` (each failure appends a
@@ -157,6 +160,8 @@ class FrameResult:
     worker: str
     rgb: np.ndarray | None = None
     noisy: np.ndarray | None = None
+    #: The whole task's time in the worker (render, denoise, writes).
+    task_seconds: float = 0.0
 
 
 @dataclass
@@ -286,6 +291,7 @@ def render_turntable_frame(spec: RenderSpec, frame: Frame, metadata: Mapping[str
     EXR (with ``metadata`` and the render time) and PNG there and move them
     into place (the EXR last: a frame whose EXR is there is whole), else
     return the image for the client to write."""
+    task_start = time.perf_counter()
     _faults(frame.index)
     with _render_lock:
         loaded = _load(spec, turntable=True)
@@ -296,9 +302,10 @@ def render_turntable_frame(spec: RenderSpec, frame: Frame, metadata: Mapping[str
         if loaded.denoiser is not None:
             rgb, noisy = loaded.denoiser(rgb, image[..., 3:6], image[..., 6:9]), rgb
     if staging is None:
-        return FrameResult(frame.index, seconds, _worker_name(), rgb, noisy)
+        return FrameResult(frame.index, seconds, _worker_name(), rgb, noisy,
+                           time.perf_counter() - task_start)
     _write_frame(frame, rgb, noisy, {**metadata, "render_seconds": float(seconds)}, staging)
-    return FrameResult(frame.index, seconds, _worker_name())
+    return FrameResult(frame.index, seconds, _worker_name(), task_seconds=time.perf_counter() - task_start)
 
 
 def _write_frame(frame: Frame, rgb: np.ndarray, noisy: np.ndarray | None,
@@ -373,9 +380,17 @@ def cluster_client(scheduler: str | None = None, workers: int | None = None,
         finally:
             client.close()
         return
-    cluster = distributed.LocalCluster(
-        n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
-        dashboard_address=None, silence_logs=logging.CRITICAL)
+    import dask
+
+    # (each worker's statistical profiler samples every thread's stack every
+    # 10 ms: a few per cent of a frame on a busy machine)
+    with dask.config.set(WORKER_CONFIG):
+        cluster = distributed.LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=True,
+            dashboard_address=None, silence_logs=logging.CRITICAL,
+            # (no dashboard; the scheduler's HTTP server on a free port: not 8787, which
+            # another run's may hold)
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     try:
         client = distributed.Client(cluster)
         try:

@@ -47,6 +47,13 @@ INDEX = "sweep.csv"
 MAX_RENDERS = 100_000
 
 
+class _RenderBar(ProgressBar):
+    """The progress bar, counting renders."""
+
+    def line(self) -> str:
+        return super().line().replace(" frames ", " renders ", 1)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = command_parser(
         PROG,
@@ -185,7 +192,7 @@ def sweep(args: argparse.Namespace) -> int:
              f"on the Dask cluster at {args.scheduler}" if args.scheduler else
              f"on a local Dask cluster of {args.workers} worker process(es)")
     print(f"{PROG}: {args.scene} -> {out_dir}{os.sep}\n  {len(renders)} render(s) {where}", flush=True)
-    progress = ProgressBar(len(renders))
+    progress = _RenderBar(len(renders))
     done: dict[int, object] = {}
     state: dict[str, object] = {}
 
