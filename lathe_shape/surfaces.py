@@ -4,7 +4,7 @@ A *surface* (the :class:`Surface` protocol) bundles what the ``lathe`` plugin
 needs from one profile kind, without any plugin code (so a native
 ``mi.Shape`` can reuse it):
 
-* ``tessellate(steps)`` -- the reference mesh (local frame);
+* ``tessellate(steps, max_bands)`` -- the reference mesh (local frame);
 * ``intersect(o, d, tmax, active)`` / ``occluded(...)`` -- the exact kernel
   on local-frame rays, returning ``(t, seg, u, valid)`` hits;
 * ``next_crossing(...)`` -- the kernel that walks a ray through its
@@ -71,8 +71,10 @@ class Surface(Protocol):
     #: The validated profile (numpy only).
     profile: Profile | BSplineProfile
 
-    def tessellate(self, steps: int) -> TriangleMesh:
-        """The reference mesh with ``steps`` azimuthal steps (local frame)."""
+    def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
+        """The reference mesh with ``steps`` azimuthal steps (local frame),
+        with at most about ``max_bands`` profile bands where given (a
+        proxy)."""
 
     def intersect(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> LatheHit:
         """Nearest hit with ``0 < t < tmax`` of local-frame rays ``o + t d``."""
@@ -152,8 +154,8 @@ class PolylineSurface(_KernelSurface):
         self.profile = profile
         self.smooth = smooth
 
-    def tessellate(self, steps: int) -> TriangleMesh:
-        return tessellate_profile(self.profile, steps, smooth=self.smooth)
+    def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
+        return tessellate_profile(self.profile, steps, smooth=self.smooth, max_bands=max_bands)
 
     def _build_data(self) -> PolylineData:
         return profile_polyline_data(self.profile, self.smooth)
@@ -225,11 +227,11 @@ class BSplineSurface(_KernelSurface):
             points[-1] = points[0]  # bit-identical seam positions
         return points, normals, v
 
-    def tessellate(self, steps: int) -> TriangleMesh:
+    def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
         points, normals, v = self.profile_samples
         start = np.arange(len(points) - 1)
         bands = np.stack([start, start + 1], axis=1)
-        return revolve(points, normals, v, bands, steps)
+        return revolve(points, normals, v, bands, steps, max_bands)
 
     def _build_data(self) -> BSplineData:
         return build_bspline_data(self.profile.segment_controls, free_ends=self.profile.open_sheet)

@@ -55,6 +55,7 @@ def revolve(
     ring_v: np.ndarray,
     bands: np.ndarray,
     azimuth_steps: int,
+    max_bands: int | None = None,
 ) -> TriangleMesh:
     """Sweep profile vertices ("rings") about the z axis and connect them.
 
@@ -67,9 +68,16 @@ def revolve(
     azimuth ``2 pi j / steps`` with u = j / steps, the last column repeating
     the first one's position (the texture seam). Pole rings use slot j for
     the copy of wedge j (normal and u at the wedge's middle azimuth).
+
+    ``max_bands``: at most that many bands (a light proxy of a profile of
+    a million points), see :func:`thin_bands`.
     """
     if azimuth_steps < 3:
         raise ValueError(f"mesh_segments must be at least 3, got {azimuth_steps}")
+    band_of_band = np.arange(len(bands))
+    if max_bands is not None and len(bands) > max_bands:
+        ring_points, ring_normals, ring_v, bands, band_of_band = thin_bands(
+            ring_points, ring_normals, ring_v, bands, max_bands)
     steps = int(azimuth_steps)
     cols = np.arange(steps + 1)
     # Column angles, with the seam column at exactly the first one's angle
@@ -108,7 +116,7 @@ def revolve(
     second = np.stack([a_next, b + j, b + j + 1], axis=-1)
     faces = np.stack([first, second], axis=1)
     keep = np.stack([~pole[bands[:, 0]], ~pole[bands[:, 1]]], axis=1)
-    band_of = np.broadcast_to(np.arange(len(bands))[:, None, None], (len(bands), 2, steps))
+    band_of = np.broadcast_to(band_of_band[:, None, None], (len(bands), 2, steps))
     return TriangleMesh(
         positions=positions.reshape(-1, 3),
         normals=normals.reshape(-1, 3),
@@ -118,8 +126,38 @@ def revolve(
     )
 
 
-def tessellate_profile(profile, azimuth_steps: int, smooth: bool = True) -> TriangleMesh:
-    """Tessellate a :class:`lathe_shape.profiles.polyline.Profile`.
+def thin_bands(
+    ring_points: np.ndarray,
+    ring_normals: np.ndarray,
+    ring_v: np.ndarray,
+    bands: np.ndarray,
+    max_bands: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """At most about ``max_bands`` bands: runs of consecutive bands of one
+    chain (each starting where the one before ends) become one band from
+    the run's first ring to its last; unused rings are dropped. Returns the
+    rings and bands as :func:`revolve` takes them, and each new band's
+    first original band (its ``face_band``)."""
+    m = len(bands)
+    step = -(-m // max_bands)
+    # A chain breaks before band j where it does not start at the point
+    # band j - 1 ends at
+    breaks = np.any(ring_points[bands[1:, 0]] != ring_points[bands[:-1, 1]], axis=1)
+    head = np.zeros(m, dtype=bool)
+    head[::step] = True
+    head[1:] |= breaks
+    first = np.flatnonzero(head)
+    last = np.append(first[1:] - 1, m - 1)
+    merged = np.stack([bands[first, 0], bands[last, 1]], axis=1)
+    used, renumbered = np.unique(merged, return_inverse=True)
+    return (ring_points[used], ring_normals[used], ring_v[used],
+            renumbered.reshape(merged.shape), first)
+
+
+def tessellate_profile(profile, azimuth_steps: int, smooth: bool = True,
+                       max_bands: int | None = None) -> TriangleMesh:
+    """Tessellate a :class:`lathe_shape.profiles.polyline.Profile`
+    (``max_bands``: see :func:`revolve`).
 
     With ``smooth`` the vertex normals are the profile's crease-aware shading
     normals; without, every segment gets its flat geometric normal. The
@@ -137,7 +175,7 @@ def tessellate_profile(profile, azimuth_steps: int, smooth: bool = True) -> Tria
     ring_points, ring_normals, ring_v, bands = rings_for_chain(
         profile.points, seg, n_start, n_end, v[:-1], v[1:]
     )
-    return revolve(ring_points, ring_normals, ring_v, bands, azimuth_steps)
+    return revolve(ring_points, ring_normals, ring_v, bands, azimuth_steps, max_bands)
 
 
 def rings_for_chain(

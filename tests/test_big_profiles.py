@@ -171,3 +171,82 @@ def test_million_point_kernel_data_builds():
     r_max = wall_radius(points, points[1:-1, 1]).max() / 10.0
     assert min(root[2], root[6]) <= -0.5 and max(root[3], root[7]) >= 0.5
     assert max(root[0], root[4]) >= np.float32(r_max) ** 2 and min(root[1], root[5]) == -1.0
+
+
+def test_clustered_tree_hits_what_the_heuristic_tree_hits(monkeypatch):
+    """The tree of huge profiles (``clustered_tree``, built above
+    ``CLUSTERED_ABOVE`` boxes) finds the same nearest hits, bit for bit,
+    as the heuristic's tree, and is a valid tree: every box a leaf once,
+    each node's bounds the union of its children's, within BVH_DEPTH."""
+    points = vase(20_000)
+    box_rows = common.sah_tree  # the heuristic's tree, for the comparison
+    rng = np.random.default_rng(5)
+    n = 4096
+    origin = np.stack([rng.uniform(-5, 5, n), np.full(n, -30.0), rng.uniform(0, 10, n)])
+    target = np.stack([rng.uniform(-3, 3, n), rng.uniform(-3, 3, n), rng.uniform(0, 10, n)])
+    d = (target - origin) / np.linalg.norm(target - origin, axis=0)
+    hits = []
+    for above in (10**9, 0):
+        monkeypatch.setattr(common, "CLUSTERED_ABOVE", above)
+        data = build_polyline_data(*segments(points))
+        hit = intersect_polyline(data, mi.Point3f(*origin), mi.Vector3f(*d), mi.Float(np.inf), mi.Bool(True))
+        hits.append((hit.valid.numpy(), hit.t.numpy()))
+    assert np.array_equal(hits[0][0], hits[1][0]) and hits[0][0].mean() > 0.5
+    assert np.array_equal(hits[0][1], hits[1][1])
+
+    p0, p1 = segments(points)
+    box = np.stack([np.minimum(p0[:, 0], p1[:, 0]), np.maximum(p0[:, 0], p1[:, 0]),
+                    np.minimum(p0[:, 1], p1[:, 1]), np.maximum(p0[:, 1], p1[:, 1])], axis=1)
+    tree = common.clustered_tree(box)
+    assert box_rows(box).bounds.shape == tree.bounds.shape
+    leaf = tree.leaf >= 0
+    assert np.array_equal(np.sort(tree.leaf[leaf]), np.arange(len(box)))
+    assert np.array_equal(tree.bounds[leaf], box[tree.leaf[leaf]])
+    inner = np.flatnonzero(~leaf)
+    lo, hi = tree.bounds[tree.lower[inner]], tree.bounds[tree.upper[inner]]
+    union = np.stack([np.minimum(lo[:, 0], hi[:, 0]), np.maximum(lo[:, 1], hi[:, 1]),
+                      np.minimum(lo[:, 2], hi[:, 2]), np.maximum(lo[:, 3], hi[:, 3])], axis=1)
+    assert np.array_equal(tree.bounds[inner], union)
+    assert tree.size[0] == 2 * len(box) - 1
+    depth = np.zeros(len(tree.axis), dtype=int)
+    for ids in tree.levels:
+        depth[tree.lower[ids]] = depth[ids] + 1
+        depth[tree.upper[ids]] = depth[ids] + 1
+    assert depth.max() <= BVH_DEPTH
+
+
+def test_proxy_of_a_big_profile_is_thinned(tmp_path):
+    """A 100,000-point lathe with ``reference="proxy"`` carries a proxy of
+    about PROXY_BANDS bands (runs of segments merged), spanning the same
+    heights and radii; a small profile's proxy keeps every segment; chains
+    are not merged across (a hollow profile of two loops)."""
+    from lathe_shape.plugin.reference_mesh import PROXY_BANDS, PROXY_SEGMENTS
+    from lathe_shape.profiles import write_profile_csv
+    from lathe_shape.tessellate import thin_bands
+
+    def proxy(points, name):
+        return mi.load_dict({"type": "lathe", "reference": "proxy",
+                             "filename": str(write_profile_csv(tmp_path / name, points))})
+
+    points = vase(100_000)
+    lathe = proxy(points, "big.csv")
+    faces = lathe.face_count()
+    assert faces <= 2 * PROXY_SEGMENTS * (PROXY_BANDS + 2)
+    bands = lathe.local_mesh.face_band
+    assert bands.max() < len(points) - 1 and np.all(np.diff(bands[:: 2 * PROXY_SEGMENTS]) >= 0)
+    local = lathe.local_mesh.positions
+    assert np.isclose(local[:, 2].min(), 0.0) and np.isclose(local[:, 2].max(), 10.0)
+    assert np.isclose(np.hypot(local[:, 0], local[:, 1]).max(), points[:, 0].max(), rtol=0.02)
+
+    small = proxy(vase(200), "small.csv")
+    assert np.array_equal(np.unique(small.local_mesh.face_band), np.arange(199))
+
+    # Two chains of 6 bands each, thinned to runs of 4: the run from band 4
+    # stops at the first chain's end (band 5), the second chain starts anew
+    ring = np.array([[1, 0], [2, 0], [2, 1], [2, 2], [1, 2], [1, 1], [5, 0], [6, 0], [6, 1], [6, 2],
+                     [5, 2], [5, 1]], dtype=float)
+    bands = np.array([[k, (k + 1) % 6] for k in range(6)] + [[6 + k, 6 + (k + 1) % 6] for k in range(6)])
+    pts, _, _, thin, first = thin_bands(ring, ring, np.arange(12.0), bands, 3)
+    assert np.array_equal(first, [0, 4, 6, 8])
+    assert np.array_equal(pts[thin].tolist(), [[[1, 0], [1, 2]], [[1, 2], [1, 0]],
+                                                [[5, 0], [6, 1]], [[6, 1], [5, 0]]])

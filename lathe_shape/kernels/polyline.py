@@ -78,6 +78,7 @@ from .common import (
     LatheGeometry,
     LatheHit,
     LatheRay,
+    aligned_empty,
     bvh_link,
     child_box_arrays,
     enter_child_box,
@@ -297,10 +298,11 @@ def _node_records(rows, leaf_rec: np.ndarray) -> np.ndarray:
     # Each node's record once (the same float64 arithmetic and rounding
     # per node), then gathered for the four copies' first and second child
     per_node = _child_records(rows.tree.bounds).astype(np.float32)
-    recs = np.empty((len(rows.first), 8), dtype=np.float32)
+    recs = aligned_empty((len(rows.first), 8), np.float32)
     recs[:, :4] = per_node[rows.first]
     recs[:, 4:] = per_node[rows.second]
-    recs[~inner] = leaf_rec[rows.leaf[~inner]]
+    at_leaf = np.flatnonzero(~inner)
+    recs[at_leaf] = leaf_rec[rows.leaf[at_leaf]]
     return recs
 
 

@@ -15,9 +15,11 @@ from ..memory import available_memory
 
 __all__ = [
     "BYTES_PER_VERTEX",
+    "PROXY_BANDS",
     "PROXY_SEGMENTS",
     "REFERENCE_MODES",
     "check_mesh_budget",
+    "reference_bands",
     "reference_steps",
 ]
 
@@ -26,6 +28,12 @@ REFERENCE_MODES = ("mesh", "proxy")
 
 #: Azimuthal steps of a proxy mesh.
 PROXY_SEGMENTS = 12
+
+#: Profile bands of a proxy mesh, at most (about): a profile of a million
+#: points gets a proxy of this many (runs of its segments merged), so its
+#: load is not spent sweeping and building Mitsuba's BVH over 24 million
+#: triangles that nothing but a stock-integrator preview would show.
+PROXY_BANDS = 4096
 
 #: Peak bytes per reference-mesh vertex while a lathe is built: float64
 #: positions, normals and texture coordinates with the temporaries of the
@@ -45,6 +53,12 @@ def reference_steps(mode: str, mesh_segments: int, who: str) -> int:
             f"{', '.join(REFERENCE_MODES)})"
         )
     return min(mesh_segments, PROXY_SEGMENTS) if mode == "proxy" else mesh_segments
+
+
+def reference_bands(mode: str) -> int | None:
+    """Profile bands of the reference mesh at most for the ``reference``
+    mode (``None``: every band)."""
+    return PROXY_BANDS if mode == "proxy" else None
 
 
 def check_mesh_budget(rings: int, steps: int, who: str, available: int | None = None) -> None:

@@ -101,7 +101,7 @@ from .params import (
     typed_property,
 )
 from .profile_param import ProfileIndex, profile_index, rebuild_surface, remember_input
-from .reference_mesh import check_mesh_budget, reference_steps
+from .reference_mesh import check_mesh_budget, reference_bands, reference_steps
 from .variants import register_jit_plugin
 
 __all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
@@ -175,12 +175,16 @@ def _option(props: mi.Properties, name: str, kind: type, declared: dict, default
     return value
 
 
-def _ring_bound(surface: PolylineSurface | BSplineSurface) -> int:
+def _ring_bound(surface: PolylineSurface | BSplineSurface, reference: str = "mesh") -> int:
     """Profile rings of the reference mesh, at most (polylines: two per
-    segment where every vertex is a crease; B-splines: their samples)."""
+    segment where every vertex is a crease; B-splines: their samples; a
+    proxy: two per band it keeps)."""
     if isinstance(surface, BSplineSurface):
-        return len(surface.profile_samples[0])
-    return 2 * surface.profile.segment_count
+        rings = len(surface.profile_samples[0])
+    else:
+        rings = 2 * surface.profile.segment_count
+    bands = reference_bands(reference)
+    return rings if bands is None else min(rings, 2 * bands)
 
 
 #: Per thread: the depth of nested lathe constructors and the lathes whose
@@ -250,9 +254,9 @@ class LatheShape(mi.Mesh):
         self.flip = typed_property(props, "flip_normals", bool, False, who)
         #: (4, 4) float64 local-to-world matrix.
         self.to_world_matrix = transform_property(props, "to_world", who)
-        check_mesh_budget(_ring_bound(self.surface), steps, who)
+        check_mesh_budget(_ring_bound(self.surface, self.reference), steps, who)
         #: The reference tessellation in the local frame.
-        self.local_mesh = self.surface.tessellate(steps)
+        self.local_mesh = self.surface.tessellate(steps, reference_bands(self.reference))
         check_traceable_scale(self.to_world_matrix, self._local_size(), f"{who}: parameter 'to_world'")
 
         super().__init__(props.id() or "lathe", len(self.local_mesh.positions),
@@ -412,7 +416,7 @@ class LatheShape(mi.Mesh):
         given = self.surface.given
         try:
             surface = rebuild_surface(given, self.profile_points.numpy(), who)
-            check_mesh_budget(_ring_bound(surface), self.mesh_segments, who)
+            check_mesh_budget(_ring_bound(surface, self.reference), self.mesh_segments, who)
         except ValueError:
             # Keep the previous profile: its value goes back into the parameter.
             previous = mi.Float(given.points.ravel().astype(np.float32))
@@ -421,7 +425,7 @@ class LatheShape(mi.Mesh):
         self.surface = surface
         self.profile = surface.profile
         self._index = None
-        self.local_mesh = surface.tessellate(self.mesh_segments)
+        self.local_mesh = surface.tessellate(self.mesh_segments, reference_bands(self.reference))
         self._write_mesh({**self._mesh_buffers(self.to_world_matrix),
                           FACE_BAND_ATTRIBUTE: self.local_mesh.face_band.astype(np.float32)})
 
