@@ -1,6 +1,7 @@
 """``lathe-profile``: check a profile file, turn a curve profile (any kind
 but ``polyline``) into a polyline profile of N points, or import the
-``lathe``/``sor`` blocks of a POV-Ray scene.
+``lathe``/``sor`` objects of a POV-Ray scene (:mod:`..profiles.pov_sdl`
+reads the scene; one line per object; exit status 1 if any failed).
 
 Examples::
 
@@ -8,7 +9,8 @@ Examples::
     lathe-profile glass.csv --kind bspline --to-polyline 32              # CSV on stdout
     lathe-profile glass.csv --kind bspline --to-polyline 32 -o out       # writes out/glass_32.csv
     lathe-profile cup.csv --kind bezier --open                           # an open sheet
-    lathe-profile --from-pov vases.pov -o profiles                       # NAME.csv + NAME.xml per block
+    lathe-profile --from-pov vases.pov -o profiles                       # NAME.csv + NAME.xml per object
+    lathe-profile --from-pov vases.pov -o profiles --scene vases.xml     # + a scene for lathe-render
 
 A CSV's ``# kind: NAME`` and ``# open: true`` lines (as ``--from-pov``
 writes them) stand for ``--kind`` and ``--open``.

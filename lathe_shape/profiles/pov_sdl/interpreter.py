@@ -490,19 +490,21 @@ class Interpreter:
 
     def _define_macro(self, token: Token) -> None:
         frame = self.frames[-1]
+        if frame.pos + 1 >= frame.end or frame.tokens[frame.pos].kind != "word":
+            raise self.error("#macro: expected a name and a parameter list", token)
         name = frame.tokens[frame.pos].text
         frame.pos += 1
         params: list[str] = []
         if frame.tokens[frame.pos].text != "(":
             raise self.error(f"#macro {name}: expected '(' after the name", token)
         frame.pos += 1
-        while frame.tokens[frame.pos].text != ")":
+        while frame.pos < frame.end and frame.tokens[frame.pos].text != ")":
             t = frame.tokens[frame.pos]
             if t.kind == "word":
                 params.append(t.text)
             frame.pos += 1
-            if frame.pos >= frame.end:
-                raise self.error(f"#macro {name}: parameter list not closed", token)
+        if frame.pos >= frame.end:
+            raise self.error(f"#macro {name}: parameter list not closed", token)
         frame.pos += 1
         start = frame.pos
         end_token = self._skip((), token)

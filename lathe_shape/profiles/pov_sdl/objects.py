@@ -156,8 +156,9 @@ def _parse_lathe(interp, token: Token) -> ObjectNode:
     node = ObjectNode(obj, token.where, block=block)
     try:
         _read_lathe(interp, node, block)
-    except PovError as e:
-        block.error = str(e)
+    except (PovError, ValueError, TypeError, IndexError, ArithmeticError, RecursionError) as e:
+        block.error = str(e) if isinstance(e, PovError) else \
+            f"{interp.last.where}: {type(e).__name__}: {e}"
         interp.unwind(state)
         if frame is None or pos == 0 or frame.tokens[pos - 1] is not brace:
             raise

@@ -99,7 +99,9 @@ def walk_scene(path: str, include_path: tuple[str, ...] = INCLUDE_PATH,
                 interp.next()
                 if interp.peek_soft().text == "{":
                     skip_braces(interp, token.text)
-        except PovError as e:
+        except (PovError, ValueError, TypeError, IndexError, ArithmeticError, RecursionError) as e:
+            if not isinstance(e, PovError):
+                e = PovError(f"{interp.last.where}: {type(e).__name__}: {e}")
             notes.append(f"{e}")
             for node in interp.registry[seen:]:
                 failed_statements[id(node)] = str(e)
@@ -159,7 +161,7 @@ def _read_dormant(interp, files: list[str]) -> list[ObjectNode]:
             interp.run_dormant(tokens, k, len(tokens))
             try:
                 parse_object(interp)
-            except PovError as e:
+            except (PovError, ValueError, TypeError, IndexError, ArithmeticError, RecursionError) as e:
                 block = LatheBlock(t.text, "sor", np.zeros((0, 2)), t.where, None, error=str(e), token=t)
                 interp.registry.append(ObjectNode(t.text, t.where, block=block))
             interp.unwind(state)
