@@ -13,7 +13,8 @@ what the POV-Ray scene says literally (or through declared textures): an
 sheet), ``finish { metallic }`` or a ``reflection`` of at least 0.5 a
 ``conductor`` tinted by the pigment, a smaller ``reflection`` a ``plastic``
 with the pigment as diffuse colour, a pigment alone a ``diffuse``; else a
-neutral grey ``diffuse``. Nothing else of the POV-Ray scene (its camera,
+neutral grey ``diffuse`` (all but the dielectrics two-sided on an open
+sheet). Nothing else of the POV-Ray scene (its camera,
 lights, other objects) is carried over.
 """
 
@@ -58,6 +59,9 @@ def material_xml(material, open_sheet: bool, indent: str = "        ") -> str:
         return (f'{indent}<bsdf type="{kind}">\n'
                 f'{indent}    <float name="int_ior" value="{material.ior:.6g}"/>\n'
                 f'{indent}    <float name="ext_ior" value="1.0"/>\n{indent}</bsdf>\n')
+    if open_sheet:  # both sides of a single sheet are seen
+        inner = material_xml(material, False, indent + "    ")
+        return f'{indent}<bsdf type="twosided">\n{inner}{indent}</bsdf>\n'
     reflection = getattr(material, "reflection", None) or 0.0
     if material is not None and (material.metallic or reflection >= 0.5):
         tint = rgb(color) if color is not None and material.metallic else rgb([max(reflection, 0.6)] * 3)
