@@ -12,17 +12,17 @@ against the lathe's own exact count of the whole line
 taken twice. A white furnace (index-matched, non-absorbing liquid) checks
 the energy.
 
-Measured (20k lines, seed 3): 10 um apart, every line's walk equals both
-lathes' own counts (no odd count, none lost or doubled). Coincident, the
-walk ping-pongs between the two lathes at the shared wall: after lathe A's
-crossing at ``t`` the other lathe is asked for its first crossing after
-``t`` (``next_crossing_polyline``'s ``after_t``, converted to that
-profile's own parameter ``s`` and compared strictly), and the rounding of
-that conversion decides per line whether B's crossing at the same ``t`` is
-found, then whether A's is found again: glass 2274 odd lines, 576 with
-crossings lost and 2954 with crossings taken twice (of 18298 crossing the
-glass), liquid 3363 odd, 1759 lost, 2954 doubled (of 9947); those walks
-also run up to the step limit (40) and take minutes. Those tests are xfail.
+Measured (20k lines, seed 3): 10 um apart and coincident alike, every
+line's walk equals both lathes' own counts (no odd count, none lost or
+doubled). Coincident walls once ping-ponged: after lathe A's crossing at
+``t`` the other lathe was asked for its first crossing after ``t``
+converted to its own parameter, and that rounding decided per line whether
+B's crossing at the same ``t`` was found, then whether A's was found again
+(glass 2274 odd lines of 18298, liquid 3363 of 9947). The walk now orders
+all crossings by ``t`` (the value each kernel returns, compared exactly),
+then lathe, then each kernel's own key (docs/method.md, eq. 31); the same
+holds for coincident walls of two kinds (a polyline cup and a B-spline
+kernel liquid: 20k lines, none odd, lost or doubled).
 
 White furnace (32x32, 32 spp, max_depth 64, seeds 0 and 1), liquid 1.5
 inside and out (so its own surface carries no weight; the glass's does):
@@ -51,6 +51,7 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
+from lathe_shape.kernels.bspline import count_crossings_bspline
 from lathe_shape.kernels.polyline import count_crossings_polyline
 from lathe_shape.plugin.line_walk import start_walk
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
@@ -59,11 +60,7 @@ from lathe_shape.tools import leaks
 from lathe_shape.tools.filled_glass import filled_profiles
 
 GAP_10UM = 1e-3  # profile units (cm): 10 um
-COINCIDENT_REASON = (
-    "coincident walls: the line walk ping-pongs between the two lathes at the shared wall "
-    "(the other lathe's 'first crossing after t' is decided by the rounding of t -> its own s): "
-    "20k lines: glass 2274 odd, 576 lost, 2954 doubled of 18298; liquid 3363 odd, 1759 lost, "
-    "2954 doubled of 9947")
+
 
 
 @functools.cache
@@ -121,27 +118,35 @@ def walk_lines(geometry: ExactSceneGeometry, o: np.ndarray, d: np.ndarray, steps
 
 
 def crossing_stats(gap: float, n: int, steps: int) -> dict[str, dict[str, int]]:
-    """Per lathe: lines with an odd walked count, with fewer / more walked
-    crossings than the lathe's own count of the line, crossing lines, and
-    repeated ``t`` values of one lathe on one line."""
+    """:func:`walk_stats` of the glass and the liquid ``gap`` inside it (one
+    lathe set: both polylines)."""
     geometry = ExactSceneGeometry(two_lathes(gap))
     (group,) = geometry.groups  # both polylines: one set, walk indices 0, 1
     glass, liquid = glass_points(), liquid_points(gap)
     start, end = np.vstack([glass[:-1], liquid[:-1]]), np.vstack([glass[1:], liquid[1:]])
+    return walk_stats(geometry, group.lathes, start, end, n, steps)
+
+
+def walk_stats(geometry: ExactSceneGeometry, lathes, start: np.ndarray, end: np.ndarray, n: int,
+               steps: int) -> dict[str, dict[str, int]]:
+    """Per lathe (in walk-index order): lines with an odd walked count,
+    with fewer / more walked crossings than the lathe's own count of the
+    line, crossing lines, and repeated ``t`` values of one lathe on one
+    line; ``n`` parity rays aimed at the segments ``start -> end``."""
     o, d = leaks.parity_rays(start, end, np.random.default_rng(3), n)
-    lathes, ts = walk_lines(geometry, o, d, steps)
+    walked_lathes, ts = walk_lines(geometry, o, d, steps)
     out = {}
-    for k, lathe in enumerate(group.lathes):
-        own = count_crossings_polyline(lathe.surface.data, mi.Point3f(o.T.astype(np.float32)),
-                                       mi.Vector3f(d.T.astype(np.float32)),
-                                       dr.full(mi.Bool, True, n)).numpy()
-        walked = (lathes == k).sum(axis=1)
+    for k, lathe in enumerate(lathes):
+        count = count_crossings_bspline if lathe.surface.kind != "polyline" else count_crossings_polyline
+        own = count(lathe.surface.data, mi.Point3f(o.T.astype(np.float32)),
+                    mi.Vector3f(d.T.astype(np.float32)), dr.full(mi.Bool, True, n)).numpy()
+        walked = (walked_lathes == k).sum(axis=1)
         repeats = sum(int(np.sum(mine)) - len(np.unique(t[mine]))
-                      for t, mine in zip(ts, lathes == k, strict=True))
+                      for t, mine in zip(ts, walked_lathes == k, strict=True))
         out[lathe.id()] = {"odd": int(np.sum(walked % 2)), "own_odd": int(np.sum(own % 2)),
                            "lost": int(np.sum(walked < own)), "doubled": int(np.sum(walked > own)),
                            "lines": int(np.sum(own > 0)), "repeated_t": repeats,
-                           "unfinished": int(np.sum(lathes[:, -1] >= 0))}
+                           "unfinished": int(np.sum(walked_lathes[:, -1] >= 0))}
     return out
 
 
@@ -158,15 +163,48 @@ def test_walls_10um_apart_cross_evenly_once_each():
         assert s["unfinished"] == 0, (name, s)
 
 
-@pytest.mark.xfail(strict=True, reason=COINCIDENT_REASON)
 def test_coincident_walls_cross_evenly_once_each():
     """The same with the liquid's wall on the glass's inner wall (the same
-    points); fewer lines and steps (its walks ping-pong)."""
-    stats = crossing_stats(0.0, 1000, 12)
+    points): the walk orders crossings by t, then lathe (eq. 31), so the
+    shared wall's two crossings are each taken once."""
+    stats = crossing_stats(0.0, 20000, 24)
     print(stats)
     for name, s in stats.items():
+        assert s["lines"] > 9000, (name, s)
         assert s["own_odd"] == 0 and s["odd"] == 0, (name, s)
         assert s["lost"] == 0 and s["doubled"] == 0, (name, s)
+        assert s["unfinished"] == 0, (name, s)
+
+
+#: A straight-walled cup (polyline) and the liquid in it (a bezier profile:
+#: the B-spline kernel), whose floor and wall are the cup's inner floor and
+#: wall: two kinds, so two single lathes of the walk, not one set.
+CUP = "0 0.1, 0.9 0.1, 0.9 1, 1 1, 1 0, 0 0"
+CUP_LIQUID = ("0 0.1, 0.3 0.1, 0.6 0.1, 0.9 0.1, 0.9 0.1, 0.9 0.3, 0.9 0.6, 0.9 0.8, "
+              "0.9 0.8, 0.6 0.8, 0.3 0.8, 0 0.8")
+
+
+def test_coincident_walls_of_two_kinds_cross_evenly_once_each():
+    """Coincident walls of a polyline and a B-spline-kernel lathe (the
+    walk's single lathes, each its own kernel with its own rounding of the
+    shared wall's t): every line's walk equals both lathes' own counts."""
+    scene = mi.load_dict({"type": "scene",
+                          "cup": {"type": "lathe", "profile": CUP, "mesh_segments": 16},
+                          "liquid": {"type": "lathe", "kind": "bezier", "profile": CUP_LIQUID,
+                                     "mesh_segments": 16}})
+    geometry = ExactSceneGeometry(scene)
+    assert not geometry.groups and len(geometry.single) == 2
+    points = [np.array([[float(v) for v in p.split()] for p in text.split(",")])
+              for text in (CUP, CUP_LIQUID)]
+    start = np.vstack([p[:-1] for p in points])
+    end = np.vstack([p[1:] for p in points])
+    stats = walk_stats(geometry, geometry.single, start, end, 20000, 16)
+    print(stats)
+    for name, s in stats.items():
+        assert s["lines"] > 9000, (name, s)
+        assert s["own_odd"] == 0 and s["odd"] == 0, (name, s)
+        assert s["lost"] == 0 and s["doubled"] == 0, (name, s)
+        assert s["unfinished"] == 0, (name, s)
 
 
 FURNACE = """<scene version="3.0.0">

@@ -202,6 +202,13 @@ _T_FINAL = 1e-4
 #: Newton steps polishing the nearest hit on the (s, t) system.
 _STEPS_POLISH = 2
 
+#: Farthest the polish moves a root's s (unit frame): measured on 10^6 hits
+#: of five profiles, 99.99% move less than 2e-4 and all but a tangent's
+#: less than 2.2e-3. A walk visits the boxes that far before its last
+#: crossing (next_crossing_bspline), as a crossing is ordered by its
+#: polished s but found in the box of its root.
+_POLISH_REACH = 4e-3
+
 #: Tangent-root threshold, in units of float32 epsilon times a bound on the
 #: magnitude of the terms of F (its evaluation error is below that).
 _TANGENT_ULPS = 8.0
@@ -599,6 +606,10 @@ class _Ray(LatheRay):
         super().__init__(data, o, d, tmax, active)
         self.mode = mode  # how crossings are taken (_offer)
         self.after = None  # keyed: the crossing (s, key) to find the next one after
+        self.s_positive = self.s_lo  # hits need s > this (t > 0), whatever s_lo a walk sets
+        self.t_after = None  # ... or, after another lathe's crossing, its t
+        self.data = data  # (keyed: _offer polishes each crossing)
+        self.slack = 0.0  # keyed: how far past the best boxes are visited
         a, b, c = self.a, self.b, self.c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
         horiz = a > 1e-12
         # Closest approach to the axis (xy): s*, at distance sqrt(r0sq)
@@ -758,16 +769,20 @@ class _Best(metaclass=common.VariantStruct):
     (:func:`_offer`), ``s`` (moved frame, ``s_max``: none), its ``leaf`` and
     parameter ``u`` there (the segment and its parameter follow once, at the
     end of the traversal: :func:`_leaf_to_segment`) and crossing key
-    ``key``, and ``count``, the number of crossings (counting rays only)."""
+    ``key``, and ``count``, the number of crossings (counting rays only).
+    Keyed rays order crossings by their polished ``s`` (eq. 31): ``raw`` is
+    then the root finder's ``s`` that the polish starts from."""
 
-    _FIELDS = {"s": "Float", "u": "Float", "leaf": "UInt32", "key": "UInt32", "count": "UInt32"}
+    _FIELDS = {"s": "Float", "u": "Float", "leaf": "UInt32", "key": "UInt32", "count": "UInt32",
+               "raw": "Float"}
 
-    def __init__(self, s=None, u=None, leaf=None, key=None, count=None) -> None:
+    def __init__(self, s=None, u=None, leaf=None, key=None, count=None, raw=None) -> None:
         self.s = mi.Float(dr.inf) if s is None else s
         self.u = mi.Float(0.0) if u is None else u
         self.leaf = mi.UInt32(0) if leaf is None else leaf
         self.key = mi.UInt32(0) if key is None else key
         self.count = mi.UInt32(0) if count is None else count
+        self.raw = self.s if raw is None else raw
 
 
 def _offer(best: _Best, ray: _Ray, s, u, leaf, key, ok) -> _Best:
@@ -782,15 +797,23 @@ def _offer(best: _Best, ray: _Ray, s, u, leaf, key, ok) -> _Best:
         return _Best(best.s, best.u, best.leaf, best.key,
                      best.count + mi.UInt32(ok & (s > ray.s_lo) & (s < ray.s_max)))
     if ray.mode == "keyed":
+        # Ordered by the polished s, the place the walk returns (eq. 31: a
+        # crossing's t then orders it among the other lathes' too, and a
+        # lathe's own order agrees with its t)
+        seg, u_seg = _leaf_to_segment(ray.data, _Best(s=s, u=u, leaf=leaf), ok)
+        s_polished, _ = _polish(ray.data, ray, s, u_seg, seg, ok)
         after_s, after_key = ray.after
-        take = ok & ((s > after_s) | ((s == after_s) & (key > after_key)))
-        take &= (s < best.s) | ((s == best.s) & (key < best.key))
-        key = dr.select(take, key, best.key)
-    else:
-        take = ok & (s > ray.s_lo) & (s < best.s)
-        key = best.key  # unused: no work on the hot path
+        take = ok & ((s_polished > after_s) | ((s_polished == after_s) & (key > after_key)))
+        if ray.t_after is not None:
+            # after another lathe's crossing: on this crossing's own t
+            take &= (s_polished + ray.s_enter) * ray.t_scale > ray.t_after
+        take &= (s_polished < best.s) | ((s_polished == best.s) & (key < best.key))
+        return _Best(dr.select(take, s_polished, best.s), dr.select(take, u, best.u),
+                     dr.select(take, leaf, best.leaf), dr.select(take, key, best.key), best.count,
+                     dr.select(take, s, best.raw))
+    take = ok & (s > ray.s_lo) & (s < best.s)
     return _Best(dr.select(take, s, best.s), dr.select(take, u, best.u),
-                 dr.select(take, leaf, best.leaf), key, best.count)
+                 dr.select(take, leaf, best.leaf), best.key, best.count)
 
 
 class _Leaf:
@@ -1018,16 +1041,17 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
     hit = mi.Bool(False)        # a hit was found (ends shadow rays)
     cand = mi.Bool(False)       # node is a leaf to solve
     while active & (node < end) & ~(hit & shadow):
-        # Walk the tree to the next candidate leaf.
+        # Walk the tree to the next candidate leaf (keyed: boxes a little
+        # past the best, whose polished s may lie below its root's)
         cand = mi.Bool(False)
         while active & (node < end) & ~cand:
-            cand, node = _visit(data, ray, node, best.s, active & (node < end))
+            cand, node = _visit(data, ray, node, best.s + ray.slack, active & (node < end))
         leaf = common.bvh_link(data.links, node, cand)[2]
         best = _solve_leaf(data, node, leaf, ray, best, cand)
         hit |= best.s < ray.s_max
         node = dr.select(cand, node + 1, node)
     valid = best.s < ray.s_max
-    s = best.s
+    s = best.raw if ray.mode == "keyed" else best.s  # (keyed: polished again to best.s)
     seg, u = _leaf_to_segment(data, best, valid)
     if not shadow:
         if valid:  # (a packet without a hit skips it)
@@ -1064,6 +1088,7 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
     R, Z = _segment_cubics(data, seg, active)
     o, dh = ray.o, ray.d
     squared = _squared(data)
+    s_root = s
     for _ in range(_STEPS_POLISH):
         Rt, dR = _polyval_d(R, t)
         Zt, dZ = _polyval_d(Z, t)
@@ -1082,7 +1107,10 @@ def _polish(data: BSplineData, ray: _Ray, s, t, seg, active):
         ds = -(j22 * g1 + dZ * g2) / det
         dt = -(dh.z * g2 - j21 * g1) / det
         ok = active & (dr.abs(det) > 1e-4 * scale_j) & (dr.abs(dt) < 0.01)
-        ok &= (t + dt >= -_T_PAD) & (t + dt <= 1.0 + _T_PAD) & (s + ds > ray.s_lo)
+        # (bounded by t > 0, not by a walk's s_lo: a crossing's s must not
+        # depend on where the query starts, eq. 31)
+        ok &= (t + dt >= -_T_PAD) & (t + dt <= 1.0 + _T_PAD) & (s + ds > ray.s_positive)
+        ok &= dr.abs(s + ds - s_root) <= _POLISH_REACH
         s = dr.select(ok, s + ds, s)
         t = dr.select(ok, t + dt, t)
     return s, t
@@ -1141,12 +1169,20 @@ def next_crossing_bspline(data: BSplineData, o: mi.Point3f, d: mi.Vector3f, tmax
         s_from = dr.select(later, after_s, s_from)
         key_from = dr.select(later, after_key, key_from)
     if after_t is not None:
+        # The first crossing with t > after_t, compared on the t returned
+        # (eq. 31); s_from only prunes, lowered past the rounding of t -> s
         by_t = mi.Bool(True) if after_key is None else after_key == 0xFFFFFFFF
-        s_t = dr.maximum(after_t * dr.rcp(ray.t_scale) - ray.s_enter, ray.s_lo)
+        s_t = after_t * dr.rcp(ray.t_scale)
+        s_t = dr.maximum(s_t - ray.s_enter - 1e-5 * (dr.abs(s_t) + dr.abs(ray.s_enter)), ray.s_lo)
         s_from = dr.select(by_t, s_t, s_from)
         key_from = dr.select(by_t, 0xFFFFFFFF, key_from)
+        ray.t_after = dr.select(by_t, after_t, -dr.inf)
     ray.after = (s_from, key_from)
-    ray.s_lo = s_from  # boxes before it need no visit
+    # Boxes before it need no visit; crossings are ordered by their polished
+    # s (_offer), which lies within _POLISH_REACH of their root's: boxes
+    # that far around the interval are visited too
+    ray.slack = _POLISH_REACH * 1.25 + 1e-5 * (dr.abs(s_from) + dr.abs(ray.s_enter))
+    ray.s_lo = dr.maximum(s_from - ray.slack, ray.s_positive)
     hit, best = _trace(data, ray)
     return hit, best.s, best.key
 

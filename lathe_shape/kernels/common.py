@@ -64,6 +64,7 @@ __all__ = [
     "LatheRay",
     "NO_CROSSING",
     "VariantStruct",
+    "after_t_with_ties",
     "aligned_empty",
     "box_rmin2",
     "clustered_tree",
@@ -737,6 +738,18 @@ def _aligned(values: np.ndarray, dtype) -> np.ndarray:
     out = aligned_empty(values.shape, values.dtype)
     out[...] = values
     return out
+
+
+def after_t_with_ties(t: mi.Float, ties: mi.Bool) -> mi.Float:
+    """The ``after_t`` to pass a lathe's ``next_crossing`` kernel (which
+    returns its first crossing with ``t > after_t``, compared on the ``t``
+    it returns) for the next crossing after another lathe's at ``t``:
+    ``t`` itself, or where ``ties`` (the lathe comes after that one in the
+    walk's order, eq. 31) the float just below a positive ``t``, so that a
+    crossing at exactly ``t`` counts as after it."""
+    bits = dr.reinterpret_array(mi.UInt32, t)
+    below = dr.reinterpret_array(mi.Float, bits - 1)
+    return dr.select(ties & (t > 0) & dr.isfinite(t), below, t)
 
 
 def opaque(value, cls=None):

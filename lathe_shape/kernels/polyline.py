@@ -415,6 +415,9 @@ class _Ray(LatheRay):
         self.dz_oy = self.d.z * self.o.y
         # Crossings count after this key (t > 0: every one past s_lo)
         self.after = _Key(self.s_lo)
+        # ... and, walking after another lathe's crossing, only those with
+        # t > t_after (None: no such test)
+        self.t_after = None
         # Exactly horizontal (unit frame): every point of the ray at height o_z
         self.level = self.d.z == 0
 
@@ -701,6 +704,11 @@ def _segment_hit(data: PolylineData, ray: _Ray, seg, rec0, rec1, s1, s2, real, h
     key1, key2 = 2 * seg, 2 * seg + 1
     ok1 = take1 & ray.after.before(s1, key1) & best.after(s1, key1)
     ok2 = take2 & ray.after.before(s2, key2) & best.after(s2, key2)
+    if ray.t_after is not None:
+        # After another lathe's crossing: decided on this crossing's own t,
+        # the value returned (eq. 31; _walk_ray)
+        ok1 &= (ray.s_enter + s1) * ray.t_scale > ray.t_after
+        ok2 &= (ray.s_enter + s2) * ray.t_scale > ray.t_after
     pick2 = ok2 & (~ok1 | (s2 < s1))
     ok = ok1 | ok2
     return (dr.select(pick2, s2, s1), dr.select(pick2, u2, u1), ok,
@@ -762,11 +770,17 @@ def _walk_ray(data: PolylineData, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float,
     visit the crossings after ``(after_s, after_key)`` or ``after_t``."""
     ray = _Ray(data, o, d, tmax, active)
     s_from = ray.s_lo
+    keyed = mi.Bool(False) if after_s is None else after_key != NO_CROSSING
     if after_t is not None:
-        # t = (s_enter + s) t_scale (kernels/common.py, LatheRay)
-        s_from = dr.maximum(s_from, after_t * dr.rcp(ray.t_scale) - ray.s_enter)
+        # t = (s_enter + s) t_scale (kernels/common.py, LatheRay). Where the
+        # last crossing was another lathe's, the one after it is the first
+        # with t > after_t, compared on the t this kernel returns (the walk's
+        # order of eq. 31: the rounding of t -> s decides nothing); s_from
+        # only prunes, so it is lowered past that rounding
+        s_t = after_t * dr.rcp(ray.t_scale)
+        s_from = dr.maximum(s_from, s_t - ray.s_enter - 1e-5 * (dr.abs(s_t) + dr.abs(ray.s_enter)))
+        ray.t_after = dr.select(keyed, -dr.inf, after_t)
     if after_s is not None:
-        keyed = after_key != NO_CROSSING
         after_s = dr.select(keyed, after_s, s_from)
         later = after_s > ray.s_lo
         ray.after = _Key(dr.select(later, after_s, ray.s_lo),

@@ -51,6 +51,7 @@ from .common import (
     LatheGeometry,
     LatheHit,
     VariantStruct,
+    after_t_with_ties,
     bvh_link,
     bvh_next,
     opaque,
@@ -357,14 +358,23 @@ class LatheSet:
         return self._trace(o, d, mi.Float(tmax), mi.Bool(active), False)
 
     def next_crossing(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool,
-                      after: CrossingPlace) -> tuple[SetHit, CrossingPlace]:
+                      after: CrossingPlace, ties_from: mi.UInt32 | None = None
+                      ) -> tuple[SetHit, CrossingPlace]:
         """The next crossing of the world rays ``o + t d`` (``0 < t <
         tmax``) with any lathe of the set after ``after``, the place that a
         previous call with the same ``o``, ``d`` returned (or a place
         without lathe: the first crossing after ``after.t``); and this
-        crossing's place. Walking a ray this way finds each crossing once
-        (see ``next_crossing_polyline``)."""
-        return self._trace(o, d, mi.Float(tmax), mi.Bool(active), False, after)
+        crossing's place. Crossings are ordered by ``t``, then lathe, then
+        within a lathe by its kernel's key (eq. 31): walking a ray this way
+        finds each crossing once (see ``next_crossing_polyline``), also
+        where two lathes' walls coincide. ``ties_from`` (per lane; default:
+        past the last lathe): the first lathe of the set that comes after
+        ``after``'s lathe when that is no lathe of this set (another set's,
+        or a single lathe's, see ``ExactSceneGeometry``): from it on, a
+        crossing at exactly ``after.t`` is after ``after``."""
+        if ties_from is None:
+            ties_from = dr.full(mi.UInt32, NO_LATHE, dr.width(tmax))
+        return self._trace(o, d, mi.Float(tmax), mi.Bool(active), False, after, ties_from)
 
     def occluded(self, o: mi.Point3f, d: mi.Vector3f, tmax: mi.Float, active: mi.Bool) -> mi.Bool:
         """Whether the world rays hit a lathe of the set at some ``0 < t <
@@ -390,10 +400,11 @@ class LatheSet:
         return cand, dr.select(cand, node, bvh_next(node, link, is_leaf, entered))
 
     def _lathe_hit(self, lathe, o, d, t_max, active, shadow: bool,
-                   after: CrossingPlace | None) -> tuple[LatheHit, CrossingPlace | None]:
+                   after: CrossingPlace | None, ties_from=None) -> tuple[LatheHit, CrossingPlace | None]:
         """The kind's kernel on lathe ``lathe`` (per lane), the ray mapped to
         its local frame (same ``t``); walking (``after`` given), also the
-        crossing's place."""
+        crossing's place: the lathe's first crossing after ``after`` in the
+        walk's order (eq. 31; ``ties_from`` as in :meth:`next_crossing`)."""
         rows = _rows(self.to_local, lathe, active)
         o_local, d_local = _point(rows, o), _vector(rows, d)
         view = self.table.view(dr.gather(mi.UInt32, self.profile_of, lathe, active), active)
@@ -402,16 +413,18 @@ class LatheSet:
             return LatheHit(t=mi.Float(0.0), valid=found), None
         if after is None:
             return self.layout.intersect(view, o_local, d_local, t_max, active), None
-        # The lathe crossed last continues after that crossing, the others
-        # after its t (kernels/polyline.py, next_crossing_polyline)
+        # The lathe crossed last continues after that crossing (its kernel's
+        # key), the others after its t, a later lathe also at it (eq. 31)
         same = after.lathe == lathe
+        later = dr.select(after.lathe == NO_LATHE, lathe >= ties_from, lathe > after.lathe)
         hit, s, key = self.layout.next_crossing(
             view, o_local, d_local, t_max, active, dr.select(same, after.s, 0.0),
-            dr.select(same, after.key, NO_CROSSING), after.t)
+            dr.select(same, after.key, NO_CROSSING), after_t_with_ties(after.t, later))
         return hit, CrossingPlace(lathe, s, key, hit.t)
 
     @dr.syntax
-    def _trace(self, o, d, tmax, active, shadow: bool, after: CrossingPlace | None = None):
+    def _trace(self, o, d, tmax, active, shadow: bool, after: CrossingPlace | None = None,
+               ties_from: mi.UInt32 | None = None):
         # Slab tests: a zero direction component nudged (no 0 * inf)
         big = dr.maximum(dr.maximum(dr.abs(d.x), dr.abs(d.y)), dr.abs(d.z))
         tiny = big * 1e-20
@@ -433,8 +446,17 @@ class LatheSet:
             while active & (node < end) & ~cand:
                 cand, node = self._visit(node, o, inv_d, t_min, best.t, active & (node < end))
             index = bvh_link(self.links, node, cand)[2]
-            hit, hit_place = self._lathe_hit(index, o, d, best.t, cand, shadow, after)
-            take = cand & hit.valid & (hit.t <= best.t)
+            # (a walk asks a little past the best: at equal t the smaller
+            # lathe index is the nearer, eq. 31)
+            reach = best.t
+            if dr.hint(after is not None, mode="scalar"):
+                reach = dr.select(best.valid, best.t * (1.0 + 1e-6), best.t)
+            hit, hit_place = self._lathe_hit(index, o, d, reach, cand, shadow, after, ties_from)
+            if dr.hint(after is not None, mode="scalar"):
+                tie = (hit.t == best.t) & best.valid & (index < lathe)
+                take = cand & hit.valid & ((hit.t < best.t) | tie)
+            else:
+                take = cand & hit.valid & (hit.t <= best.t)
             best = dr.select(take, hit, best)
             lathe = dr.select(take, index, lathe)
             if dr.hint(after is not None, mode="scalar"):

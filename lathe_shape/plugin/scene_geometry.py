@@ -64,7 +64,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..kernels.common import NO_CROSSING, opaque
+from ..kernels.common import NO_CROSSING, after_t_with_ties, opaque
 from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
@@ -293,28 +293,30 @@ class ExactSceneGeometry:
         after = CrossingPlace(dr.select(same, walk.lathe, NO_LATHE), walk.s, walk.key, t0)
         walk = LineWalk(line.o, line.d, dr.full(mi.UInt32, NO_LATHE, dr.width(t0)), walk.s, walk.key, t0)
         won = mi.Bool(False)  # a lathe is nearer than the rest
-        t_best = si.t         # the nearest hit so far (along ray)
+        t_rest = si.t         # the rest's hit (along ray)
         hits = []             # (nearer, hit) of each lathe and set, in turn
+        # Lathes and sets in the order of their walk indices: at equal t on
+        # the line the first asked keeps the crossing (eq. 31)
         for index, lathe in enumerate(self.single):
-            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
+            line.maxt = self._line_reach(t0, ray.maxt, t_rest, won, walk)
             mine = after.lathe == index
             after_s, after_key = dr.select(mine, after.s, 0.0), dr.select(mine, after.key, NO_CROSSING)
+            # after another lathe's crossing at t0, a later one's at t0 too
+            after_t = after_t_with_ties(t0, (after.lathe != NO_LATHE) & (after.lathe < index))
             if shadow is None:
-                si_lathe, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, t0)
+                si_lathe, s, key = lathe.next_crossing_exact(line, active, after_s, after_key, after_t)
             else:
                 si_lathe, s, key, blocked = lathe.walk_and_test_exact(
-                    line, active, after_s, after_key, t0, shadow, shadow_active & ~occluded)
+                    line, active, after_s, after_key, after_t, shadow, shadow_active & ~occluded)
                 occluded |= blocked
             place = CrossingPlace(mi.UInt32(index), s, key, mi.Float(si_lathe.t))
-            # (the margin holds against the rest only: between lathes the
-            # nearer crossing wins, else one could be lost for good)
-            hit, t_best, walk, take = _nearer(t_best, walk, si_lathe, place, t0, dr.select(won, 0.0, margin))
+            hit, walk, take = _nearer(t_rest, won, walk, si_lathe, place, t0, margin)
             hits.append((take, hit))
             won |= take
         for group in self.groups:
-            line.maxt = t0 + dr.minimum(ray.maxt, t_best)
+            line.maxt = self._line_reach(t0, ray.maxt, t_rest, won, walk)
             si_group, place = group.ray_walk(line, active, after)
-            hit, t_best, walk, take = _nearer(t_best, walk, si_group, place, t0, dr.select(won, 0.0, margin))
+            hit, walk, take = _nearer(t_rest, won, walk, si_group, place, t0, margin)
             hits.append((take, hit))
             won |= take
             if shadow is not None:
@@ -325,6 +327,14 @@ class ExactSceneGeometry:
         for take, hit in hits:
             si = dr.select(take, hit, si)
         return _with_wi(si, ray), walk, occluded
+
+    @staticmethod
+    def _line_reach(t0: mi.Float, maxt: mi.Float, t_rest: mi.Float, won: mi.Bool, walk: LineWalk) -> mi.Float:
+        """How far along the walked line the next lathe is asked: to the
+        rest's hit (or the ray's end), and once a lathe has won, a little
+        past its crossing (``walk.t``): at equal ``t`` on the line the
+        lathe's order decides (:func:`_nearer`)."""
+        return dr.select(won, walk.t * (1.0 + 1e-6), t0 + dr.minimum(maxt, t_rest))
 
     def _rest_preliminary(self, ray: mi.Ray3f, active: mi.Bool, coherent: mi.Bool | bool = False
                           ) -> tuple[mi.PreliminaryIntersection3f, mi.SurfaceInteraction3f]:
@@ -393,16 +403,19 @@ def _with_wi(si: mi.SurfaceInteraction3f, ray: mi.Ray3f) -> mi.SurfaceInteractio
     return si
 
 
-def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f, place: CrossingPlace,
-            t0: mi.Float, margin: mi.Float) -> tuple[mi.SurfaceInteraction3f, mi.Float, LineWalk, mi.Bool]:
+def _nearer(t_rest: mi.Float, won: mi.Bool, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
+            place: CrossingPlace, t0: mi.Float, margin: mi.Float
+            ) -> tuple[mi.SurfaceInteraction3f, LineWalk, mi.Bool]:
     """Whether a lathe's hit ``si_lathe`` (``t`` along the walked line,
-    which the ray meets at ``t0``) is nearer than the nearest hit so far,
-    ``t_best`` along the ray, by more than ``margin``: ``(hit, t_best,
-    walk, take)``, the lathe's hit with its ``t`` along the ray, the new
-    nearest ``t``, the walk that goes on from the nearer, and whether the
-    lathe's hit is the nearer."""
+    which the ray meets at ``t0``) is the nearest so far: before the rest's
+    hit ``t_rest`` (along the ray) by more than ``margin``, and, where a
+    lathe asked before has ``won``, before that lathe's crossing on the
+    line (``walk.t``; equal: the one asked before keeps it, eq. 31).
+    Returns ``(hit, walk, take)``: the lathe's hit with its ``t`` along the
+    ray, the walk that goes on from the nearer, and whether the lathe's hit
+    is the nearer."""
     t_ray = dr.maximum(si_lathe.t - t0, 0.0)
-    take = si_lathe.is_valid() & (t_ray < t_best - margin)
+    take = si_lathe.is_valid() & (t_ray < t_rest - margin) & (~won | (place.t < walk.t))
     walk = LineWalk(walk.o, walk.d, dr.select(take, place.lathe, walk.lathe),
                     dr.select(take, place.s, walk.s), dr.select(take, place.key, walk.key),
                     dr.select(take, place.t, walk.t))
@@ -410,7 +423,7 @@ def _nearer(t_best: mi.Float, walk: LineWalk, si_lathe: mi.SurfaceInteraction3f,
     # must not be assigned (place.t may be that very array).
     hit = mi.SurfaceInteraction3f(si_lathe)
     hit.t = t_ray
-    return hit, dr.select(take, t_ray, t_best), walk, take
+    return hit, walk, take
 
 
 #: Most non-lathe shapes whose surface interactions are computed by
@@ -556,7 +569,12 @@ class LatheGroup:
         mine = (after.lathe >= self.first) & (after.lathe - self.first < self.count)
         lathe = dr.select(mine, after.lathe - self.first, NO_LATHE)
         local = CrossingPlace(lathe, after.s, after.key, after.t)
-        hit, place = self.set.next_crossing(line.o, line.d, line.maxt, active, local)
+        # After a lathe numbered before this set's, every lathe of the set
+        # comes later (a crossing at after.t too, eq. 31); after one
+        # numbered past it, or none, none does
+        ties_from = dr.select((after.lathe != NO_LATHE) & (after.lathe < self.first), mi.UInt32(0),
+                              mi.UInt32(NO_LATHE))
+        hit, place = self.set.next_crossing(line.o, line.d, line.maxt, active, local, ties_from)
         place.lathe = place.lathe + self.first
         return self._interaction(line, hit), place
 
