@@ -5,10 +5,11 @@ the script then times, in this one process:
 
 * ``validate``: reading and validating the profile (``make_profile``),
 * ``tree``: the segment tree alone (``child_box_arrays`` on the segment
-  boxes, as ``build_polyline_data`` builds it) and, with ``--old``, the same
+  boxes, as ``build_polyline_data`` builds it: ``sah_tree`` up to
+  ``CLUSTERED_ABOVE`` segments, ``clustered_tree`` above) and, with ``--old``, the same
   tree and node records by the recursive builder it replaced
   (``_sah_split`` + ``_store_copies``), the ratio and whether both are
-  bit for bit the same,
+  bit for bit the same (up to ``CLUSTERED_ABOVE`` segments),
 * ``kernel data``: all of ``build_polyline_data``,
 * ``load``: ``mi.load_dict`` of a scene with the lathe (``--reference``),
 * ``first render`` / ``second render``: ``W x H`` at 1 spp with ``lathe_path``,
