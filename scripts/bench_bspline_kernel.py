@@ -2,7 +2,7 @@
 kernel on its 31-segment adaptive approximation (no path tracer).
 
 The glass is the 12-segment B-spline of ``scripts/bench_spline.py``
-(``lathe_shape.tools.reference.SPLINE_GLASS``). Three
+(``lathe_shape.validation.reference.SPLINE_GLASS``). Three
 ray sets, each ``--rays`` rays, in the lathe's local frame:
 
 * ``camera``: the wine_glass camera's pinhole rays through a pixel grid
@@ -41,7 +41,7 @@ from lathe_shape.kernels import polyline as P
 from lathe_shape.profiles import bspline as B
 from lathe_shape.profiles.bspline import make_bspline_profile, to_polyline
 from lathe_shape.profiles.polyline import make_profile
-from lathe_shape.tools.reference import SPLINE_GLASS
+from lathe_shape.validation.reference import SPLINE_GLASS
 
 
 def load_kernel(path: str | None, name: str = "_bench_alt"):

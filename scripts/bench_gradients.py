@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from lathe_shape.tools.bench import bench_arguments, median_spread
 from lathe_shape.tools.diff_scenes import lathe_scene
 from lathe_shape.tools.gradients import gradient_times
+from lathe_shape.validation.bench import bench_arguments, median_spread
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -4,7 +4,7 @@ as ratios measured in one run.
 1. Per scene and max_depth: `lathe_path` (exact) against stock `path` on the
    reference mesh at the scene's own `mesh_segments` (512), and against the
    coarsest mesh whose render agrees with the exact one within noise on the
-   glass pixels (found first, see `tools.bench.coarsest_agreeing_mesh`).
+   glass pixels (found first, see `validation.bench.coarsest_agreeing_mesh`).
 2. `lathe_path` on goblet profiles of 31 ... 1000 segments in one scene.
 3. The first render in a fresh process with an empty kernel cache (JIT
    compilation included), `path` on the mesh against `lathe_path`:
@@ -25,7 +25,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.tools.bench import (
+from lathe_shape.validation.bench import (
     bench_arguments,
     bench_scene,
     coarsest_agreeing_mesh,

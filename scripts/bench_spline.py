@@ -23,9 +23,9 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from lathe_shape.tools.bench import bench_arguments, bench_scene, interleaved_render_times, median_spread
 from lathe_shape.tools.images import relative_error
-from lathe_shape.tools.reference import SPLINE_GLASS
+from lathe_shape.validation.bench import bench_arguments, bench_scene, interleaved_render_times, median_spread
+from lathe_shape.validation.reference import SPLINE_GLASS
 
 ROOT = Path(__file__).resolve().parents[1]
 GLASS_SCENE = ROOT / "scenes" / "wine_glass.xml"

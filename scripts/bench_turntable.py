@@ -8,7 +8,7 @@ seeding policies.
     python scripts/bench_turntable.py --resolution 512 --variant cuda_ad_rgb
 """
 
-from lathe_shape.tools.turntable_bench import run_bench
+from lathe_shape.validation.turntable_bench import run_bench
 
 if __name__ == "__main__":
     raise SystemExit(run_bench())

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import mitsuba as mi
 
-from lathe_shape.tools.bench import bench_arguments, interleaved_render_times, median_spread
 from lathe_shape.tools.scenes import load_string_in, set_film_size
+from lathe_shape.validation.bench import bench_arguments, interleaved_render_times, median_spread
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"

@@ -28,9 +28,9 @@ PROG = "compare_povray.py"
 
 def compare(args: argparse.Namespace) -> int:
     from lathe_shape.tools.images import write_images
-    from lathe_shape.tools.paper import write_sheet
-    from lathe_shape.tools.povray_compare import aa_grid, compare_scene
     from lathe_shape.tools.povray_export import PovExportError
+    from lathe_shape.validation.paper import write_sheet
+    from lathe_shape.validation.povray_compare import aa_grid, compare_scene
 
     cli.check_render_options(args)
     cli.check_at_least("--max-depth", args.max_depth, 1)

@@ -33,7 +33,7 @@ def furnace(args: argparse.Namespace) -> int:
     check_at_least("--spp", args.spp, 1)
     width, height = parse_resolution(args.resolution)
     select_variant(args.variant)
-    from lathe_shape.tools.furnace import furnace_table
+    from lathe_shape.validation.furnace import furnace_table
 
     print(f"furnace: {width}x{height}, {args.spp} spp, max_depth -1, dielectric int_ior 1.5")
     print(f"{'normal_check':<14}{'mean':>10}{'energy loss':>13}{'std':>10}{'speckles':>10}")

@@ -5,7 +5,7 @@ sundae cup, a wine glass) are followed through every hit the way
 integrators do (``si.spawn_ray`` past each hit: the restart is offset along
 the geometric normal by Mitsuba's ray epsilon), on the same rays for every
 query: random ones, rays aimed exactly at profile vertices and rays grazing
-them (see ``lathe_shape.tools.leaks.parity_rays``). The queries: ``exact``,
+them (see ``lathe_shape.validation.leaks.parity_rays``). The queries: ``exact``,
 the scene geometry of ``lathe_path``, which carries the walked line from
 hit to hit (``lathe_shape.plugin.line_walk``); ``offset``, the lathe's own
 query on the spawned rays alone; ``mesh``, Mitsuba's own mesh of the same
@@ -19,7 +19,7 @@ counts of each per profile and in total.
 
 ``--random-profiles`` runs the earlier measurement instead: random closed
 profiles, each free stretch of a ray between hits checked by a float64
-inside test (``lathe_shape.tools.leaks.crossing_leaks``).
+inside test (``lathe_shape.validation.leaks.crossing_leaks``).
 
 Usage: ``python scripts/leak_test.py [--rays 1e6] [--chunk 250000]
 [--mesh-segments 512] [--random-profiles] [--variant llvm_ad_rgb]``
@@ -29,10 +29,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lathe_shape.tools import leaks
+from lathe_shape.validation import leaks
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
-#: The refraction walks' counts (see lathe_shape.tools.leaks.refraction_walk).
+#: The refraction walks' counts (see lathe_shape.validation.leaks.refraction_walk).
 REFRACT = ("refract", "refract_mesh")
 
 

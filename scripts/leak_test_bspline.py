@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lathe_shape.tools import bspline_leaks, leaks
+from lathe_shape.validation import bspline_leaks, leaks
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 GLASS = SCENES / "paper" / "glass_bspline.csv"

@@ -21,7 +21,7 @@ arcs divided equally, docs/method.md section 2.3), and the two rules of (b).
 (b) *Which polyline is optimal for a given curve?* The error proxy ``E = sum_i
 L_i dtheta_i^2`` and the rules ``kappa^2/3`` (points at equal steps of ``int
 kappa^(2/3) ds``, E-optimal) and ``greedy`` (halve the piece with the largest
-``L dtheta^2``) are explained in :mod:`lathe_shape.tools.placement`. The
+``L dtheta^2``) are explained in :mod:`lathe_shape.validation.placement`. The
 proxy is checked against the image error (rank correlation over all
 renders), and the table lists the segments each rule needs to reach the
 image error of the uniform polyline with 31 segments (fig. 8a's count).
@@ -54,9 +54,9 @@ def study_bspline(paper, render: Render, counts: list[int], tmp: Path) -> dict:
     """Error and proxy of every rule and count on the fig. 8b B-spline glass."""
     from lathe_shape.profiles import bspline as bs
     from lathe_shape.profiles import write_profile_csv
-    from lathe_shape.tools import placement as pl
     from lathe_shape.tools.images import relative_error
-    from lathe_shape.tools.paper import glass_control_points
+    from lathe_shape.validation import placement as pl
+    from lathe_shape.validation.paper import glass_control_points
 
     figure = paper.open_problems["bspline"]["figure"]
     exact = render(figure, None)
@@ -86,9 +86,9 @@ def study_arcs(paper, render: Render, figure: str, name: str, steps: list[float]
     """Error and proxy of the arc-equal, uniform and kappa^2/3 rules on an
     arc-built figure, at the segment counts of the arc steps ``steps``."""
     from lathe_shape.profiles import build_from_spec, spec_with_step, write_profile_csv
-    from lathe_shape.tools import placement as pl
     from lathe_shape.tools.images import relative_error
-    from lathe_shape.tools.paper import arc_spec
+    from lathe_shape.validation import placement as pl
+    from lathe_shape.validation.paper import arc_spec
 
     spec = arc_spec(paper, figure)
     exact = render(figure, paper.references[name].profile_file)
@@ -114,8 +114,8 @@ def study_arcs(paper, render: Render, figure: str, name: str, steps: list[float]
 
 def study(args: argparse.Namespace) -> int:
     from lathe_shape.cli.common import select_variant
-    from lathe_shape.tools.paper import load_paper, render_exact, render_size
-    from lathe_shape.tools.placement import error_report, plot_errors
+    from lathe_shape.validation.paper import load_paper, render_exact, render_size
+    from lathe_shape.validation.placement import error_report, plot_errors
 
     select_variant(args.variant)
     cli.check_at_least("--spp", args.spp, 1)
@@ -150,7 +150,7 @@ def study(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lathe_shape.tools.paper import script_parser
+    from lathe_shape.validation.paper import script_parser
 
     parser = script_parser(PROG, __doc__, os.path.join("out", "open_problems"),
                            "open_problems.txt and open_problems.png", seed=3,

@@ -22,7 +22,7 @@ from pathlib import Path
 import drjit as dr
 import mitsuba as mi
 
-from lathe_shape.tools.bench import bench_arguments, bench_scene, interleaved_render_times, median_spread
+from lathe_shape.validation.bench import bench_arguments, bench_scene, interleaved_render_times, median_spread
 
 ROOT = Path(__file__).resolve().parents[1]
 

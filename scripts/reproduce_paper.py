@@ -9,7 +9,7 @@ See docs/method.md, "The paper's results".
     python scripts/reproduce_paper.py --make            # regenerate the derived profiles of scenes/paper/
 
 The figures, their profiles and references are data: ``scenes/paper/figures.json``
-(read by :mod:`lathe_shape.tools.paper`). For every figure the script renders
+(read by :mod:`lathe_shape.validation.paper`). For every figure the script renders
 the scene in ``scenes/paper/`` with the exact ``lathe_whitted`` integrator
 (the paper's Whitted ray tracing: Fresnel-weighted reflection and
 refraction, point lights, no noise; ``--integrator lathe_path`` path-traces
@@ -54,7 +54,7 @@ PROG = "reproduce_paper.py"
 
 def make_profiles(paper) -> int:
     """--make: rewrite the derived profiles, check the segment counts."""
-    from lathe_shape.tools.paper import segment_counts, write_derived_profiles
+    from lathe_shape.validation.paper import segment_counts, write_derived_profiles
 
     write_derived_profiles(paper)
     counts = segment_counts(paper)
@@ -66,7 +66,7 @@ def make_profiles(paper) -> int:
 def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dict, dict, dict]:
     """Every figure (timed, after a warm-up) and every reference, written to ``out``."""
     from lathe_shape.tools.images import write_exr, write_png
-    from lathe_shape.tools.paper import render_exact
+    from lathe_shape.validation.paper import render_exact
 
     defines = cli.parse_defines(args.defines)
     images, times, references = {}, {}, {}
@@ -106,7 +106,7 @@ def table_rows(paper, counts, images, times, references, ref_spp: int) -> list[s
 
 def reproduce(args: argparse.Namespace) -> int:
     from lathe_shape.cli.common import select_variant
-    from lathe_shape.tools.paper import load_paper, render_size, segment_counts, write_sheet
+    from lathe_shape.validation.paper import load_paper, render_size, segment_counts, write_sheet
 
     select_variant(args.variant)
     paper = load_paper()
@@ -137,7 +137,7 @@ def reproduce(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lathe_shape.tools.paper import PAPER_INTEGRATORS, script_parser
+    from lathe_shape.validation.paper import PAPER_INTEGRATORS, script_parser
 
     parser = script_parser(PROG, __doc__, os.path.join("out", "paper"), "figures, references, table, sheet",
                            seed=7, quick="48x48, 4 spp, references 16 spp (a CI smoke run)",

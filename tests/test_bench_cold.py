@@ -1,4 +1,4 @@
-"""The cold first-render measurement of the benchmarks (tools/bench.py):
+"""The cold first-render measurement of the benchmarks (validation/bench.py):
 a fresh process with an empty kernel cache, its time split into compilation
 and execution."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from conftest import SCENES, VARIANT
 
-from lathe_shape.tools.bench import cold_first_render_parts
+from lathe_shape.validation.bench import cold_first_render_parts
 
 
 def test_cold_first_render_parts():

@@ -18,10 +18,10 @@ mi = pytest.importorskip("mitsuba")
 dr = pytest.importorskip("drjit")
 
 from lathe_shape.profiles import bspline as B  # noqa: E402
-from lathe_shape.tools import reference as ref  # noqa: E402
-from lathe_shape.tools.leaks import bspline_leak_rate  # noqa: E402
+from lathe_shape.validation import reference as ref  # noqa: E402
+from lathe_shape.validation.leaks import bspline_leak_rate  # noqa: E402
 
-#: The test curves (see lathe_shape.tools.reference.BSPLINE_CURVES): a
+#: The test curves (see lathe_shape.validation.reference.BSPLINE_CURVES): a
 #: glass-wall ring (closed periodic), an egg / vase (open, both ends on the
 #: axis) and a 12-segment closed glass profile.
 RING, EGG, GLASS12 = (ref.BSPLINE_CURVES[k] for k in ("ring", "egg", "glass12"))

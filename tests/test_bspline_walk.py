@@ -16,9 +16,9 @@ from conftest import CUDA_ROUNDING, ROOT  # noqa: E402
 from lathe_shape.kernels import bspline as K  # noqa: E402
 from lathe_shape.kernels.top_level import ProfileTable  # noqa: E402
 from lathe_shape.surfaces import make_surface  # noqa: E402
-from lathe_shape.tools import bspline_leaks as L  # noqa: E402
-from lathe_shape.tools import leaks  # noqa: E402
-from lathe_shape.tools.leaks import parity_rays  # noqa: E402
+from lathe_shape.validation import bspline_leaks as L  # noqa: E402
+from lathe_shape.validation import leaks  # noqa: E402
+from lathe_shape.validation.leaks import parity_rays  # noqa: E402
 
 #: Closed profiles of the other cubic kinds (a sor from the axis to the axis,
 #: a Bezier glass with corners where its control points repeat).

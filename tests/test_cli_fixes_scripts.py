@@ -13,8 +13,8 @@ import pytest
 from conftest import ROOT, VARIANT
 
 from lathe_shape.cli.common import DEFAULT_VARIANT
-from lathe_shape.tools import leaks
-from lathe_shape.tools.turntable_bench import bench_parser
+from lathe_shape.validation import leaks
+from lathe_shape.validation.turntable_bench import bench_parser
 
 
 def load_script(name: str):

@@ -56,8 +56,8 @@ from lathe_shape.kernels.polyline import count_crossings_polyline
 from lathe_shape.plugin.line_walk import start_walk
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
 from lathe_shape.profiles import read_points
-from lathe_shape.tools import leaks
 from lathe_shape.tools.filled_glass import filled_profiles
+from lathe_shape.validation import leaks
 
 GAP_10UM = 1e-3  # profile units (cm): 10 um
 

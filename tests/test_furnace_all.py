@@ -17,7 +17,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from lathe_shape.tools.furnace import furnace_scene, glass_mask
+from lathe_shape.validation.furnace import furnace_scene, glass_mask
 
 #: A convex closed profile (both ends on the axis), about the size of the
 #: furnace glass, with flat normals: no shading normal to contradict.

@@ -14,7 +14,7 @@ from lathe_shape.cli.common import root_message
 from lathe_shape.plugin.lathe_path import LathePathIntegrator
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
 from lathe_shape.plugin.shape import LatheShape
-from lathe_shape.tools.furnace import furnace_scene, glass_mask, run_furnace
+from lathe_shape.validation.furnace import furnace_scene, glass_mask, run_furnace
 
 
 def camera_rays(scene: mi.Scene) -> tuple[mi.Ray3f, tuple[int, int]]:

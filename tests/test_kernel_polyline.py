@@ -15,8 +15,8 @@ from lathe_shape.kernels.polyline import (
     occluded_polyline,
     polyline_geometry,
 )
-from lathe_shape.tools import leaks
-from lathe_shape.tools import reference as ref
+from lathe_shape.validation import leaks
+from lathe_shape.validation import reference as ref
 
 PROFILES = ref.test_profiles(np.random.default_rng(7))
 NAMES = [name for name, _ in PROFILES]

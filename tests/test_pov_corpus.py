@@ -32,7 +32,7 @@ from conftest import VARIANT
 from lathe_shape.cli import profile as cli
 from lathe_shape.profiles import read_points, read_profile_options
 from lathe_shape.profiles.pov import read_pov_objects, to_world
-from lathe_shape.tools.povray_compare import render_povray
+from lathe_shape.validation.povray_compare import render_povray
 
 EXAMPLES = Path("/usr/share/doc/povray/examples")
 pytestmark = pytest.mark.skipif(not (EXAMPLES / "objects" / "lathe2.pov").is_file(),

@@ -18,7 +18,7 @@ from lathe_shape.profiles import ProfileError
 from lathe_shape.profiles.bspline import evaluate
 from lathe_shape.profiles.sor import make_sor_profile
 from lathe_shape.profiles.spline_kinds import make_cubic_profile
-from lathe_shape.tools.leaks import spawn_walk
+from lathe_shape.validation.leaks import spawn_walk
 
 Poly = np.polynomial.Polynomial
 

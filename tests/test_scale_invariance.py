@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from lathe_shape.kernels.bspline import bspline_geometry, build_bspline_data, intersect_bspline
 from lathe_shape.kernels.polyline import build_polyline_data, intersect_polyline, polyline_geometry
-from lathe_shape.tools import reference as ref
+from lathe_shape.validation import reference as ref
 
 EXAMPLES = int(os.environ.get("LATHE_FUZZ_EXAMPLES", "25"))
 KINDS = ("polyline", "bspline")

@@ -9,7 +9,7 @@ from conftest import SCENES
 from lathe_shape.tools.denoise import box_filter_xml, multijitter_xml
 from lathe_shape.tools.scenes import load_scene
 from lathe_shape.tools.turntable import Turntable
-from lathe_shape.tools.turntable_bench import denoise_errors, lathe_mask
+from lathe_shape.validation.turntable_bench import denoise_errors, lathe_mask
 
 pytest.importorskip("pyoidn")
 

@@ -6,7 +6,7 @@ import pytest
 from conftest import SCENES, VARIANT
 
 from lathe_shape.cli.common import CliError
-from lathe_shape.tools.turntable_bench import frame_times, run_bench
+from lathe_shape.validation.turntable_bench import frame_times, run_bench
 
 
 @pytest.mark.parametrize(("option", "value", "message"), [

@@ -24,8 +24,8 @@ from lathe_shape.kernels.polyline import (
 )
 from lathe_shape.plugin.line_walk import start_walk
 from lathe_shape.plugin.scene_geometry import ExactSceneGeometry
-from lathe_shape.tools import reference as ref
 from lathe_shape.tools.scenes import load_scene
+from lathe_shape.validation import reference as ref
 
 PROFILES = dict(ref.test_profiles(np.random.default_rng(7)))
 

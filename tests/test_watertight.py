@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 
 from lathe_shape.kernels.polyline import build_polyline_data, count_crossings_polyline
 from lathe_shape.surfaces import PolylineSurface
-from lathe_shape.tools import leaks
-from lathe_shape.tools import reference as ref
+from lathe_shape.validation import leaks
+from lathe_shape.validation import reference as ref
 
 EXAMPLES = int(os.environ.get("LATHE_FUZZ_EXAMPLES", "10"))
 SCENE_FILES = ["brandy_bottle.csv", "sundae_cup.csv", "wine_glass.csv"]

@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from lathe_shape.tools.furnace import furnace_scene, glass_mask
+from lathe_shape.validation.furnace import furnace_scene, glass_mask
 
 GLASS = "0 0, 1.5 0, 1.6 2.5, 1.2 4.5, 0 4.6"
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
-from .scenes import load_string_in, replace_profile, set_film_size
+from ..tools.scenes import load_string_in, replace_profile, set_film_size
 
 __all__ = [
     "bench_arguments",
@@ -135,8 +135,8 @@ def coarsest_agreeing_mesh(scene_at: Callable[[int], mi.Scene], exact_scene: mi.
     error, the noise); segments is None when no candidate agrees.
     ``scene_at(n)`` loads the scene with ``mesh_segments`` n.
     """
+    from ..tools.images import relative_error
     from .furnace import glass_mask
-    from .images import relative_error
 
     exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "normal_check": "none"})
     mesh_integrator = mi.load_dict({"type": "path", "max_depth": max_depth})

@@ -19,9 +19,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .denoise import Denoiser
-from .images import image_errors, relative_error
-from .turntable import Turntable
+from ..tools.denoise import Denoiser
+from ..tools.images import image_errors, relative_error
+from ..tools.turntable import Turntable
 
 __all__ = [
     "bench_parser", "compared_frames", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench",
@@ -53,7 +53,7 @@ def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution
     over the second. A failing ``lathe-turntable`` raises its message."""
     from ..cli.common import CliError
     from ..cli.turntable import main
-    from .scenes import load_scene
+    from ..tools.scenes import load_scene
 
     define_args = [a for d in defines for a in ("-D", d)]
     values = dict(d.split("=", 1) for d in defines)
@@ -199,8 +199,8 @@ def run_bench(argv: list[str] | None = None) -> int:
 def _bench(args: argparse.Namespace) -> int:
     """The body of :func:`run_bench`."""
     from ..cli.common import select_variant
-    from .denoise import DenoiseError, box_filter_xml, choose_backend, multijitter_xml
-    from .scenes import load_string_in, set_film_size
+    from ..tools.denoise import DenoiseError, box_filter_xml, choose_backend, multijitter_xml
+    from ..tools.scenes import load_string_in, set_film_size
 
     _check_counts(args)
     defines = args.defines or ["integrator=lathe_path", "max_depth=8"]
@@ -266,7 +266,7 @@ DEFAULT_SCENE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.
 def _scene_file(path: str) -> str:
     """``--scene``: a readable, well-formed scene file with a lathe shape,
     else the parser's one-line error naming the file and the problem."""
-    from .scenes import SceneError, lathe_ids, read_scene_text
+    from ..tools.scenes import SceneError, lathe_ids, read_scene_text
 
     try:
         if not lathe_ids(read_scene_text(path), path):

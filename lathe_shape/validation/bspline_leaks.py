@@ -5,7 +5,7 @@ A ray from outside a closed lathe must cross it an even number of times.
 :func:`~lathe_shape.kernels.bspline.next_crossing_bspline` (the first
 origin kept, each query asking for the crossing after the one just taken),
 and :func:`walk_parity_leaks` counts the odd ones over the rays of
-:func:`lathe_shape.tools.leaks.parity_rays`, aimed at random points, at
+:func:`lathe_shape.validation.leaks.parity_rays`, aimed at random points, at
 the leaves' joints and next to them, for any cubic-kind lathe data: the
 B-spline test curves (:func:`curve_data`) or the points of a profile file
 taken as B-spline control points (:func:`profile_file_data`). The same rays are also counted in
@@ -51,7 +51,7 @@ def leaf_joints(data: BSplineData) -> np.ndarray:
 
 def curve_data(name: str) -> BSplineData:
     """Kernel data of the B-spline test curve ``name`` (a key of
-    :data:`lathe_shape.tools.reference.BSPLINE_CURVES`)."""
+    :data:`lathe_shape.validation.reference.BSPLINE_CURVES`)."""
     return build_bspline_data(ref.bspline_curve(name)[0])
 
 
@@ -95,7 +95,7 @@ def _walk(data: BSplineData, o: mi.Point3f, d: mi.Vector3f, max_hits: int):
 def walk_parity_leaks(data: BSplineData, n: int, seed: int, chunk: int = 250_000) -> dict[str, int]:
     """Parity of :func:`crossing_walk_bspline` and of
     :func:`~lathe_shape.kernels.bspline.count_crossings_bspline` over ``n``
-    rays from outside (:func:`~lathe_shape.tools.leaks.parity_rays` with the
+    rays from outside (:func:`~lathe_shape.validation.leaks.parity_rays` with the
     leaf joints as vertices), in chunks of ``chunk`` rays. Returns the
     counts ``rays``, ``hitting`` (walk), ``odd_walk``, ``stuck``,
     ``odd_count`` and ``disagree`` (rays whose walk and count differ)."""

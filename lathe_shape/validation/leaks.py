@@ -4,7 +4,7 @@ A kernel leaks when a ray crosses the surface without a reported hit. Two
 measurements follow rays through all their hits:
 
 * :func:`crossing_leaks` (polyline lathes): the float64 inside test of
-  :mod:`lathe_shape.tools.reference` checks every free stretch of the ray
+  :mod:`lathe_shape.validation.reference` checks every free stretch of the ray
   between hits, with :func:`polyline_callback` wrapping the kernel;
 * :func:`bspline_leak_rate` (B-spline lathes): a ray entering a closed
   solid from outside must be crossed an even number of times;
@@ -164,7 +164,7 @@ def crossing_leaks(intersect: Callable, prof, o: np.ndarray, d: np.ndarray, off_
 
 def bspline_leak_rate(curve: str, n: int, seed: int) -> tuple[float, int]:
     """``(rate, entered)``: of ``n`` rays from outside aimed at the test curve
-    ``curve`` (see :func:`lathe_shape.tools.reference.bspline_rays`), the
+    ``curve`` (see :func:`lathe_shape.validation.reference.bspline_rays`), the
     ``entered`` ones that hit it, and the fraction of those crossing it an
     odd number of times. After each hit a ray restarts ``1e-4`` of the
     curve's size past it."""
@@ -404,8 +404,8 @@ def random_profile_leaks(n_rays: int, seed: int = 2024,
                          chunk: int = 200_000) -> list[tuple[str, int, int, int]]:
     """:func:`crossing_leaks` of the polyline kernel over ``n_rays`` rays in
     all, shared among the random closed test profiles of
-    :func:`lathe_shape.tools.reference.test_profiles` (rays of
-    :func:`lathe_shape.tools.reference.random_rays` that start outside).
+    :func:`lathe_shape.validation.reference.test_profiles` (rays of
+    :func:`lathe_shape.validation.reference.random_rays` that start outside).
     Returns ``(name, rays, hitting, leaks)`` per profile."""
     rng = np.random.default_rng(seed)
     profiles = ref.test_profiles(rng)

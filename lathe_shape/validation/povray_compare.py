@@ -98,8 +98,8 @@ def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple
 def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 10,
                   seed: int = 0) -> Comparison:
     """Export ``scene`` to ``folder/scene.pov``, render both, compare."""
-    from .images import image_errors
-    from .povray_export import scene_to_pov
+    from ..tools.images import image_errors
+    from ..tools.povray_export import scene_to_pov
 
     folder = Path(folder)
     pov_file = folder / "scene.pov"

@@ -168,7 +168,7 @@ def write_derived_profiles(paper: Paper) -> list[str]:
 def segment_counts(paper: Paper) -> dict[str, int]:
     """Load every figure's scene; the segment count of its lathe."""
     from ..plugin.shape import scene_lathes
-    from .scenes import load_scene
+    from ..tools.scenes import load_scene
 
     counts = {}
     for name in paper.figures:
@@ -187,7 +187,7 @@ def _declared_default(path: Path, name: str) -> str | None:
 def _load(path: Path, defines: dict[str, str], resolution: tuple[int, int] | None, profile_file: str | None):
     """The scene, its lathe reading ``profile_file`` (a polyline file; relative to
     the scene's folder) when given."""
-    from .scenes import load_scene, replace_profile
+    from ..tools.scenes import load_scene, replace_profile
 
     if profile_file is None:
         return load_scene(path, defines, resolution)
@@ -243,7 +243,7 @@ def write_sheet(path: str | os.PathLike, images: list[tuple[str, np.ndarray]],
     as fractions of the image) below, labelled."""
     from PIL import Image, ImageDraw
 
-    from .images import to_srgb8
+    from ..tools.images import to_srgb8
 
     tiles = []
     for label, rgb in images:
