@@ -45,7 +45,8 @@ if _command_name() and _signal.getsignal(_signal.SIGINT) in (_signal.default_int
 
 import mitsuba as mi  # noqa: E402 (after the Ctrl-C watcher)
 
-from .plugin.variants import MIN_LLVM_VERSION, check_llvm, on_variant_change, register  # noqa: E402
+from .plugin import on_variant_change, register  # noqa: E402
+from .plugin.variants import MIN_LLVM_VERSION, check_llvm  # noqa: E402
 from .profiles import Profile, ProfileError, make_profile  # noqa: E402
 
 __all__ = [

@@ -1,5 +1,8 @@
-"""Registering the plugins for the active Mitsuba variant: only JIT variants
-run them, and LLVM variants need a libLLVM that Dr.Jit can use."""
+"""What registering a plugin for the active Mitsuba variant needs: only JIT
+variants run the plugins, and LLVM variants need a libLLVM that Dr.Jit can
+use. A leaf: it imports nothing of the package (each plugin module calls
+:func:`register_jit_plugin`; :func:`lathe_shape.plugin.register` registers
+them all)."""
 
 from __future__ import annotations
 
@@ -10,7 +13,7 @@ from collections.abc import Callable
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["MIN_LLVM_VERSION", "check_llvm", "on_variant_change", "register", "register_jit_plugin"]
+__all__ = ["MIN_LLVM_VERSION", "check_llvm", "register_jit_plugin"]
 
 
 def register_jit_plugin(
@@ -90,33 +93,3 @@ def check_llvm(variant: str | None = None) -> None:
             "with 'Cannot select fminimum'). Fix: 'apt-get install -y libllvm19' "
             "(Dr.Jit finds it by itself), or point DRJIT_LIBLLVM_PATH at libLLVM.so.19.1."
         )
-
-
-def register(variant: str | None = None) -> None:
-    """Register the ``lathe`` shape and the ``lathe_path``,
-    ``lathe_whitted``, ``lathe_prb`` and ``lathe_volpath`` integrators for the active Mitsuba
-    variant."""
-    if variant is None:
-        variant = mi.variant()
-    if variant is None:
-        return
-    check_llvm(variant)
-    from .dispersive_dielectric import register as register_dispersive
-    from .lathe_path import register as register_path
-    from .lathe_prb import register as register_prb
-    from .lathe_volpath import register as register_volpath
-    from .lathe_whitted import register as register_whitted
-    from .shape import register as register_shape
-
-    register_shape()
-    register_path()
-    register_whitted()
-    register_prb()
-    register_dispersive()
-    register_volpath()
-
-
-def on_variant_change(old: str | None, new: str | None) -> None:
-    """Mitsuba variant callback: register the plugins for the new variant."""
-    if new is not None:
-        register(new)
