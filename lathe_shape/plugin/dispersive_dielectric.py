@@ -1,37 +1,6 @@
 """The ``dispersive_dielectric`` BSDF: a smooth dielectric interface whose
 interior index of refraction depends on the wavelength (dispersion, the
-"fire" of cut crystal).
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``int_ior``
-     - float or string
-     - Interior index. A ``<float>`` is n_d, the index at the helium d line
-       (587.56 nm); with ``abbe`` the index follows Cauchy's law through
-       n_F, n_d and n_C, without it the index is constant (no dispersion).
-       A ``<string>`` names a glass of :data:`GLASSES` (``bk7``, ``f2``,
-       ``sf11``, ``fused_silica``; case and ``-``/``_`` ignored), given by
-       its Sellmeier coefficients. (Default: ``bk7`` when neither form of
-       ``sellmeier_b``/``sellmeier_c`` is given)
-   * - ``abbe``
-     - float
-     - Abbe number V_d = (n_d - 1) / (n_F - n_C) of a ``<float>`` ``int_ior``
-       (positive; crown glass about 64, dense flint about 25).
-   * - ``sellmeier_b``, ``sellmeier_c``
-     - string
-     - The interior index as the Sellmeier equation
-       n^2 = 1 + sum_i B_i lambda^2 / (lambda^2 - C_i), lambda in micrometres,
-       C_i in square micrometres: three comma-separated values each (both
-       are needed; not together with ``int_ior``/``abbe``).
-   * - ``ext_ior``
-     - float or string
-     - Exterior index, constant, as for Mitsuba's ``dielectric``: a number
-       or a material name (``air``, ``water``, ``vacuum``, ...; Mitsuba's
-       own table). (Default: ``air``)
+"fire" of cut crystal; parameters: :class:`DispersiveDielectric`).
 
 Smooth (Dirac delta) reflection and refraction weighted by the unpolarized
 Fresnel reflectance, as Mitsuba's ``dielectric``: the interior index is
@@ -182,8 +151,38 @@ def _fresnel(cos_i, eta):
 
 
 class DispersiveDielectric(mi.BSDF):
-    """Smooth dielectric with a wavelength-dependent interior index (see
-    the module docstring)."""
+    """Smooth dielectric with a wavelength-dependent interior index.
+
+    .. pluginparameters::
+
+     * - int_ior
+       - |float| or |string|
+       - Interior index. A ``<float>`` is n_d, the index at the helium d line
+         (587.56 nm); with ``abbe`` the index follows Cauchy's law through
+         n_F, n_d and n_C, without it the index is constant (no dispersion).
+         A ``<string>`` names a glass of :data:`GLASSES` (``bk7``, ``f2``,
+         ``sf11``, ``fused_silica``; case and ``-``/``_`` ignored), given by
+         its Sellmeier coefficients. (Default: ``bk7`` when neither form of
+         ``sellmeier_b``/``sellmeier_c`` is given)
+
+     * - abbe
+       - |float|
+       - Abbe number V_d = (n_d - 1) / (n_F - n_C) of a ``<float>`` ``int_ior``
+         (positive; crown glass about 64, dense flint about 25).
+
+     * - sellmeier_b, sellmeier_c
+       - |string|
+       - The interior index as the Sellmeier equation
+         n^2 = 1 + sum_i B_i lambda^2 / (lambda^2 - C_i), lambda in micrometres,
+         C_i in square micrometres: three comma-separated values each (both
+         are needed; not together with ``int_ior``/``abbe``).
+
+     * - ext_ior
+       - |float| or |string|
+       - Exterior index, constant, as for Mitsuba's ``dielectric``: a number
+         or a material name (``air``, ``water``, ``vacuum``, ...; Mitsuba's
+         own table). (Default: ``air``)
+    """
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)

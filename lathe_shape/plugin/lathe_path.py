@@ -1,44 +1,5 @@
-"""The ``lathe_path`` integrator: path tracing with exact lathes.
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``max_depth``
-     - integer
-     - Longest path depth (-1 = infinite). 1 renders only directly visible
-       emitters, 2 direct illumination, and so on. (Default: -1)
-   * - ``rr_depth``
-     - integer
-     - Path depth from which Russian roulette may stop paths. (Default: 5)
-   * - ``hide_emitters``
-     - boolean
-     - Hide directly visible emitters, as Mitsuba's ``path`` does: a camera
-       ray goes on through the area emitters it meets first, and the
-       environment seen directly (or only through ``null`` surfaces) is
-       black with alpha 0. (Default: false)
-   * - ``normal_check``
-     - string
-     - What to do where the interpolated shading normal contradicts the real
-       surface (the paper's eq. 11): ``none`` traces on as stock Mitsuba does;
-       ``terminate`` stops the path there (the paper's rule); ``fallback``
-       (default) redoes that vertex with the geometric normal, which conserves
-       energy for dielectrics and removes the speckles of ``none``.
-   * - ``aovs``
-     - string
-     - Comma-separated guide images for a denoiser, appended after the
-       image's RGB(A) channels in this order: ``albedo`` (channels
-       ``albedo.R``, ``albedo.G``, ``albedo.B``) and ``nn`` (the shading
-       normal, ``nn.X``, ``nn.Y``, ``nn.Z``, world space, turned to face the
-       ray), named as Mitsuba's ``aov`` integrator names them. (Default: none)
-   * - ``aov_through_delta``
-     - boolean
-     - Where the guides are taken: ``true`` (default) at the first vertex
-       whose BSDF is not a Dirac delta, seen through glass and mirrors (the
-       albedo weighted by the delta bounces' throughput); ``false`` at the
-       first surface hit, a glass surface then having albedo 1.
+"""The ``lathe_path`` integrator: path tracing with exact lathes (parameters:
+:class:`LathePathIntegrator`).
 
 Every ``lathe`` in the scene is intersected exactly by its kernel, merged with
 Mitsuba's hit on the rest of the scene (see :mod:`lathe_shape.plugin.scene_geometry`);
@@ -67,16 +28,23 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .integrator_base import (
+    NORMAL_CHECKS,
+    ExactLatheSamplingIntegrator,
+    contradicts,
+    mis_weight,
+    normal_check_parameter,
+    sample_with_fallback,
+    with_geometric_frame,
+)
 from .line_walk import start_walk
-from .media_check import refuse_media
 from .params import path_parameters, typed_property
-from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
-__all__ = ["AOV_CHANNELS", "LathePathIntegrator", "NORMAL_CHECKS", "parse_aovs", "register"]
-
-#: Policies of the ``normal_check`` parameter (docs/method.md, eq. 11).
-NORMAL_CHECKS = ("none", "terminate", "fallback")
+# (NORMAL_CHECKS, contradicts, mis_weight, sample_with_fallback and
+# with_geometric_frame live in integrator_base; importable from here too)
+__all__ = ["AOV_CHANNELS", "LathePathIntegrator", "NORMAL_CHECKS", "contradicts", "mis_weight", "parse_aovs",
+           "register", "sample_with_fallback", "with_geometric_frame"]
 
 #: The guide images of the ``aovs`` parameter and their channel names.
 AOV_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "nn": ("nn.X", "nn.Y", "nn.Z")}
@@ -102,92 +70,59 @@ def guide_channels(aovs: tuple[str, ...], albedo: mi.Spectrum, normal: mi.Vector
     return [channel for name in aovs for channel in guides[name]()]
 
 
-def mis_weight(pdf_a: mi.Float, pdf_b: mi.Float) -> mi.Float:
-    """Power-heuristic MIS weight of strategy a against b."""
-    a2, b2 = dr.square(pdf_a), dr.square(pdf_b)
-    w = a2 / (a2 + b2)
-    return dr.select(dr.isfinite(w), w, 0.0)
+class LathePathIntegrator(ExactLatheSamplingIntegrator):
+    """Path tracer that renders every ``lathe`` shape exactly.
 
+    .. pluginparameters::
 
-def contradicts(si: mi.SurfaceInteraction3f, cos_in_geo: mi.Float, bs: mi.BSDFSample3f,
-                wo_world: mi.Vector3f) -> mi.Bool:
-    """Eq. 11, outgoing side: whether the sampled direction ``wo_world``
-    contradicts the real surface (a reflection must stay on the incident
-    side of the geometric normal, a transmission must cross it);
-    ``cos_in_geo`` is the incident direction's cosine with ``si.n``."""
-    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
-    side = cos_in_geo * dr.dot(si.n, wo_world)
-    return (bs.pdf > 0.0) & dr.select(reflected, side <= 0.0, side >= 0.0)
+     * - max_depth
+       - |int|
+       - Longest path depth (-1 = infinite). 1 renders only directly visible
+         emitters, 2 direct illumination, and so on. (Default: -1)
 
+     * - rr_depth
+       - |int|
+       - Path depth from which Russian roulette may stop paths. (Default: 5)
 
-@dr.syntax
-def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
-                         wo_em: mi.Vector3f, samples: tuple, redraws: tuple, cos_in_geo: mi.Float,
-                         checked: mi.Bool, active: mi.Bool, geo_frame: mi.Frame3f) -> tuple:
-    """The ``fallback`` policy's BSDF sampling: one ``eval_pdf_sample``
-    call (the light direction ``wo_em``'s value and pdf, and a sampled
-    direction), redone with the geometric frame and the ``redraws`` where
-    the ``checked`` lanes' sample contradicts the real surface (eq. 11).
-    Both passes go through the same call site in a loop, so the BSDFs'
-    code is compiled once; packets without a contradicting vertex run it
-    once. ``geo_frame``: ``mi.Frame3f(si.n)``, made once by the caller for
-    this vertex. Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the
-    light direction's value and pdf are those of the first pass."""
-    wi_world = si.to_world(si.wi)
-    value_em = mi.Spectrum(0.0)                  # Light direction's BSDF value (first pass)
-    pdf_em = mi.Float(0.0)                       # ... and its pdf
-    bs = dr.zeros(mi.BSDFSample3f)               # Sampled direction (last pass)
-    weight = mi.Spectrum(0.0)                    # ... its weight
-    wo_world = mi.Vector3f(0.0)                  # ... and its world direction
-    geometric = dr.zeros(mi.Bool, dr.width(wi_world))  # Lanes redrawing with the geometric frame
-    todo = mi.Bool(active)                       # Lanes with a pass still to run
-    while todo:
-        si_pass = mi.SurfaceInteraction3f(si)
-        si_pass.sh_frame = dr.select(geometric, geo_frame, si.sh_frame)
-        si_pass.wi = dr.select(geometric, si_pass.to_local(wi_world), si.wi)
-        sample_1 = dr.select(geometric, redraws[0], samples[0])
-        sample_2 = dr.select(geometric, redraws[1], samples[1])
-        value, pdf, bs_pass, weight_pass = bsdf.eval_pdf_sample(ctx, si_pass, wo_em, sample_1, sample_2, todo)
-        first = todo & ~geometric
-        value_em = dr.select(first, value, value_em)
-        pdf_em = dr.select(first, pdf, pdf_em)
-        bs = dr.select(todo, bs_pass, bs)
-        weight = dr.select(todo, weight_pass, weight)
-        wo_world = dr.select(todo, si_pass.to_world(bs_pass.wo), wo_world)
-        geometric = first & checked & contradicts(si, cos_in_geo, bs_pass, wo_world)
-        todo = geometric
-    return value_em, pdf_em, bs, weight, wo_world
+     * - hide_emitters
+       - |bool|
+       - Hide directly visible emitters, as Mitsuba's ``path`` does: a camera
+         ray goes on through the area emitters it meets first, and the
+         environment seen directly (or only through ``null`` surfaces) is
+         black with alpha 0. (Default: false)
 
+     * - normal_check
+       - |string|
+       - What to do where the interpolated shading normal contradicts the real
+         surface (the paper's eq. 11): ``none`` traces on as stock Mitsuba does;
+         ``terminate`` stops the path there (the paper's rule); ``fallback``
+         redoes that vertex with the geometric normal, which conserves
+         energy for dielectrics and removes the speckles of ``none``.
+         (Default: ``fallback``)
 
-def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool,
-                         geo_frame: mi.Frame3f | None = None) -> mi.SurfaceInteraction3f:
-    """``si`` with its shading frame replaced by the geometric normal where
-    ``use`` is set (``wi`` re-expressed in the new frame); ``geo_frame``:
-    ``mi.Frame3f(si.n)`` if the caller has it (else made here)."""
-    si = mi.SurfaceInteraction3f(si)
-    wi_world = si.to_world(si.wi)
-    si.sh_frame = dr.select(use, mi.Frame3f(si.n) if geo_frame is None else geo_frame, si.sh_frame)
-    # Only where the frame changes: elsewhere wi stays bit for bit, and a
-    # missed ray's wi (a world direction, with no frame) stays what the
-    # environment is looked up with
-    si.wi = dr.select(use, si.to_local(wi_world), si.wi)
-    return si
+     * - aovs
+       - |string|
+       - Comma-separated guide images for a denoiser, appended after the
+         image's RGB(A) channels in this order: ``albedo`` (channels
+         ``albedo.R``, ``albedo.G``, ``albedo.B``) and ``nn`` (the shading
+         normal, ``nn.X``, ``nn.Y``, ``nn.Z``, world space, turned to face the
+         ray), named as Mitsuba's ``aov`` integrator names them. (Default: none)
 
+     * - aov_through_delta
+       - |bool|
+       - Where the guides are taken: ``true`` at the first vertex whose BSDF
+         is not a Dirac delta, seen through glass and mirrors (the albedo
+         weighted by the delta bounces' throughput); ``false`` at the first
+         surface hit, a glass surface then having albedo 1. (Default: true)
+    """
 
-class LathePathIntegrator(mi.SamplingIntegrator):
-    """Path tracer that renders every ``lathe`` shape exactly (see module
-    docstring for the parameters)."""
+    plugin_name = "lathe_path"
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
-        who = "lathe_path"
+        who = self.plugin_name
         self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, who)
-        self.normal_check = typed_property(props, "normal_check", str, "fallback", who)
-        if self.normal_check not in NORMAL_CHECKS:
-            raise ValueError(
-                f"lathe_path: parameter 'normal_check': unknown policy '{self.normal_check}' "
-                f"(expected one of: {', '.join(NORMAL_CHECKS)})"
-            )
+        self.normal_check = normal_check_parameter(props, who)
         #: The guide images rendered as AOVs (see ``aovs``).
         self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who))
         if self.aovs and not mi.is_rgb:
@@ -196,26 +131,6 @@ class LathePathIntegrator(mi.SamplingIntegrator):
                 f"this is '{mi.variant()}'"
             )
         self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
-        self._geometry = None
-
-    def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The scene's exact-lathe ray queries; follows the scene's edits
-        (see :meth:`ExactSceneGeometry.for_scene`)."""
-        geometry = ExactSceneGeometry.for_scene(scene, self._geometry)
-        refuse_media(geometry.lathes, "lathe_path")
-        # Without lathes the geometry is the scene itself: not kept, as the
-        # scene owns this integrator.
-        self._geometry = geometry if geometry.lathes else None
-        return geometry
-
-    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
-               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
-        """Mitsuba's render, with the scene geometry built first: built
-        inside :meth:`sample`, after the render has queued its camera rays,
-        it would evaluate part of that work early and make the first
-        render's kernel differ from every later one (a second compilation)."""
-        self.geometry(scene)
-        return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     @dr.syntax
     def sample(

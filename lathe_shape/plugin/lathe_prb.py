@@ -1,30 +1,5 @@
-"""The ``lathe_prb`` integrator: differentiable path tracing with exact lathes.
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``max_depth``, ``rr_depth``, ``hide_emitters``
-     - integer, integer, boolean
-     - The path's longest depth (-1 = infinite; default 6; the
-       differential pass stops at 64 vertices), the depth where Russian
-       roulette starts (default 5), and whether directly visible emitters
-       are hidden (default false), as for ``lathe_path``.
-   * - ``normal_check``
-     - string
-     - The eq. 11 policy where the interpolated shading normal contradicts
-       the real surface, as for ``lathe_path``: ``none``, ``terminate`` or
-       ``fallback`` (default).
-   * - ``silhouette``
-     - boolean
-     - Add the derivative of the lathes' moving outlines as the camera sees
-       them (edge sampling of the exact silhouette,
-       :mod:`lathe_shape.plugin.silhouette`). (Default: true)
-   * - ``silhouette_spp``
-     - integer
-     - Camera rays on each side of every outline sample. (Default: 4)
+"""The ``lathe_prb`` integrator: differentiable path tracing with exact lathes
+(parameters: :class:`LathePRBIntegrator`).
 
 Differentiable path tracing on the exact lathe geometry of ``lathe_path``.
 The primal render is one symbolic loop, as ``lathe_path``'s. The
@@ -66,11 +41,16 @@ import dataclasses
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from mitsuba.ad.integrators.common import RBIntegrator, mis_weight, solid_angle_to_area_jacobian
+from mitsuba.ad.integrators.common import RBIntegrator, solid_angle_to_area_jacobian
 
 from .attached_hits import attach_lathe_hits, differentiable_lathes
-from .lathe_path import NORMAL_CHECKS, contradicts, with_geometric_frame
-from .media_check import refuse_media
+from .integrator_base import (
+    contradicts,
+    exact_lathe_base,
+    mis_weight,
+    normal_check_parameter,
+    with_geometric_frame,
+)
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
@@ -177,8 +157,8 @@ class _Path:
     ray: mi.Ray3f              # The ray to the next vertex (it moves with the vertex that made it)
     depth: mi.UInt32           # Number of surface interactions so far
     L: mi.Spectrum             # Radiance gathered so far
-    β: mi.Spectrum             # Path throughput weight
-    η: mi.Float                # Product of relative IORs (Russian roulette)
+    beta: mi.Spectrum          # Path throughput weight
+    eta: mi.Float              # Product of relative IORs (Russian roulette)
     active: mi.Bool            # Lanes whose path goes on
     prev: mi.Interaction3f     # The previous vertex (detached), for MIS of hit emitters
     bsdf_pdf_prev: mi.Float    # BSDF pdf of the direction that left it ...
@@ -186,42 +166,59 @@ class _Path:
     valid_ray: mi.Bool         # Alpha: the camera ray met a surface or a visible environment
 
 
-class LathePRBIntegrator(RBIntegrator):
-    """Differentiable path tracing with exact lathes (see
-    the module docstring for the parameters)."""
+class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
+    """Differentiable path tracing with exact lathes.
+
+    .. pluginparameters::
+
+     * - max_depth
+       - |int|
+       - The path's longest depth (-1 = infinite; the differential pass stops
+         at 64 vertices), as for ``lathe_path``. (Default: 6)
+
+     * - rr_depth
+       - |int|
+       - Path depth from which Russian roulette may stop paths. (Default: 5)
+
+     * - hide_emitters
+       - |bool|
+       - Hide directly visible emitters, as for ``lathe_path``. (Default: false)
+
+     * - normal_check
+       - |string|
+       - The eq. 11 policy where the interpolated shading normal contradicts
+         the real surface, as for ``lathe_path``: ``none``, ``terminate`` or
+         ``fallback``. (Default: ``fallback``)
+
+     * - silhouette
+       - |bool|
+       - Add the derivative of the lathes' moving outlines as the camera sees
+         them (edge sampling of the exact silhouette,
+         :mod:`lathe_shape.plugin.silhouette`). (Default: true)
+
+     * - silhouette_spp
+       - |int|
+       - Camera rays on each side of every outline sample. (Default: 4)
+    """
+
+    plugin_name = "lathe_prb"
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
-        self.normal_check = typed_property(props, "normal_check", str, "fallback", "lathe_prb")
-        if self.normal_check not in NORMAL_CHECKS:
-            raise ValueError(
-                f"lathe_prb: parameter 'normal_check': unknown policy '{self.normal_check}' "
-                f"(expected one of: {', '.join(NORMAL_CHECKS)})"
-            )
-        self.silhouette = typed_property(props, "silhouette", bool, True, "lathe_prb")
-        self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, "lathe_prb")
+        who = self.plugin_name
+        self.normal_check = normal_check_parameter(props, who)
+        self.silhouette = typed_property(props, "silhouette", bool, True, who)
+        self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, who)
         if self.silhouette_spp < 1:
             raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
-        self._geometry = None
         self._differentiating = False
         self._lobes = (True, True)
 
-    def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The scene's exact-lathe ray queries (kept while the scene's
-        shapes stay the same, as ``lathe_path`` keeps them)."""
-        current = ExactSceneGeometry.for_scene(scene, self._geometry)
-        refuse_media(current.lathes, "lathe_prb")
-        self._geometry = current if current.lathes else None
-        for lathe in differentiable_lathes(current.lathes):
-            # Index maps built here, outside the traced loop (no new
-            # buffers inside it)
+    def prepare_geometry(self, geometry: ExactSceneGeometry) -> None:
+        """The differentiable lathes' index maps, built here, outside the
+        traced loop (no new buffers inside it)."""
+        for lathe in differentiable_lathes(geometry.lathes):
             lathe.profile_index  # noqa: B018
-        return current
-
-    # Built before the render queues its camera rays (see lathe_path.render).
-    def render(self, scene: mi.Scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        self.geometry(scene)
-        return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     def render_forward(self, scene: mi.Scene, params, sensor=0, seed=0, spp=0):
         geometry = self.geometry(scene)
@@ -334,7 +331,7 @@ class LathePRBIntegrator(RBIntegrator):
         the profile (derivatives recorded, see :meth:`sample_attached`)."""
         check = self.normal_check
         ctx = mi.BSDFContext()
-        ray, depth, β, η, active = path.ray, path.depth, path.β, path.η, path.active
+        ray, depth, beta, eta, active = path.ray, path.depth, path.beta, path.eta, path.active
         si = geometry.ray_intersect(ray, active, depth == 0)
         if attached:
             # Stored, so that the reverse pass reads the hit instead of
@@ -371,7 +368,7 @@ class LathePRBIntegrator(RBIntegrator):
         if attached:
             dr.eval(mis)  # (as the hit)
         show = active & (depth > 0) if self.hide_emitters else active
-        L = path.L + β * mis * ds.emitter.eval(si, show)
+        L = path.L + beta * mis * ds.emitter.eval(si, show)
 
         # --------------------------- Emitter sampling ----------------------------
         active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -388,7 +385,7 @@ class LathePRBIntegrator(RBIntegrator):
             ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
         bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
         mis_em = dr.select(ds.delta, 1, mis_weight(ds.pdf, dr.detach(bsdf_pdf_em)))
-        L += dr.select(active_em, β * mis_em * bsdf_val_em * em_weight, 0)
+        L += dr.select(active_em, beta * mis_em * bsdf_val_em * em_weight, 0)
 
         # ------------------ BSDF sampling (eq. 11 on the detached draw) ------------------
         sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
@@ -414,19 +411,19 @@ class LathePRBIntegrator(RBIntegrator):
             wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
                                                    self._lobes)
             bsdf_weight = bsdf_weight * factor
-        β = β * bsdf_weight
-        η = η * bs.eta
+        beta = beta * bsdf_weight
+        eta = eta * bs.eta
 
         # ---------------------------- Russian roulette ----------------------------
-        β_max = dr.max(mi.unpolarized_spectrum(dr.detach(β)))
-        active_next &= β_max != 0
-        rr_prob = dr.minimum(β_max * dr.square(η), 0.95)
+        beta_max = dr.max(mi.unpolarized_spectrum(dr.detach(beta)))
+        active_next &= beta_max != 0
+        rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
         rr_active = depth >= self.rr_depth
-        β[rr_active] *= dr.rcp(rr_prob)
+        beta[rr_active] *= dr.rcp(rr_prob)
         active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
 
         depth = dr.select(si_detached.is_valid(), depth + 1, depth)
-        return _Path(si.spawn_ray(wo_world), depth, L, β, η, active_next, mi.Interaction3f(si_detached),
+        return _Path(si.spawn_ray(wo_world), depth, L, beta, eta, active_next, mi.Interaction3f(si_detached),
                      bs.pdf, delta, valid_ray)
 
     def to_string(self) -> str:

@@ -1,26 +1,5 @@
-"""The ``lathe_volpath`` integrator: volumetric path tracing with exact lathes.
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``max_depth``
-     - integer
-     - Longest path depth (-1 = infinite), counting surface and medium
-       scattering events as Mitsuba's ``volpath`` does (crossings of
-       ``null`` surfaces do not count). 1 renders only directly visible
-       emitters, 2 direct illumination, and so on. (Default: -1)
-   * - ``rr_depth``
-     - integer
-     - Path depth from which Russian roulette may stop paths. (Default: 5)
-   * - ``hide_emitters``
-     - boolean
-     - Hide directly visible emitters, as Mitsuba's ``volpath`` does: a
-       camera ray goes on through the area emitters it meets first, and the
-       environment seen directly (or only through ``null`` surfaces) is
-       black with alpha 0. (Default: false)
+"""The ``lathe_volpath`` integrator: volumetric path tracing with exact lathes
+(parameters: :class:`LatheVolpathIntegrator`).
 
 What it renders: Mitsuba's ``volpath`` semantics over scenes whose ``lathe``
 shapes are intersected exactly (every ray query goes through
@@ -72,7 +51,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels.top_level import NO_LATHE
-from .lathe_path import mis_weight
+from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
 from .line_walk import LineWalk, start_walk
 from .params import path_parameters
 from .scene_geometry import ExactSceneGeometry
@@ -93,28 +72,37 @@ def _reset_walk(walk: LineWalk, where: mi.Bool) -> LineWalk:
     return LineWalk(walk.o, walk.d, dr.select(where, NO_LATHE, walk.lathe), walk.s, walk.key, walk.t)
 
 
-class LatheVolpathIntegrator(mi.SamplingIntegrator):
-    """Volumetric path tracer that renders every ``lathe`` shape exactly (see
-    module docstring for the parameters)."""
+class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
+    """Volumetric path tracer that renders every ``lathe`` shape exactly.
+
+    .. pluginparameters::
+
+     * - max_depth
+       - |int|
+       - Longest path depth (-1 = infinite), counting surface and medium
+         scattering events as Mitsuba's ``volpath`` does (crossings of
+         ``null`` surfaces do not count). 1 renders only directly visible
+         emitters, 2 direct illumination, and so on. (Default: -1)
+
+     * - rr_depth
+       - |int|
+       - Path depth from which Russian roulette may stop paths. (Default: 5)
+
+     * - hide_emitters
+       - |bool|
+       - Hide directly visible emitters, as Mitsuba's ``volpath`` does: a
+         camera ray goes on through the area emitters it meets first, and the
+         environment seen directly (or only through ``null`` surfaces) is
+         black with alpha 0. (Default: false)
+    """
+
+    plugin_name = "lathe_volpath"
+    #: Media are what this integrator is for.
+    refuses_media = False
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
-        who = "lathe_volpath"
-        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, who)
-        self._geometry = None
-
-    def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The scene's exact-lathe ray queries (as ``lathe_path``'s)."""
-        geometry = ExactSceneGeometry.for_scene(scene, self._geometry)
-        self._geometry = geometry if geometry.lathes else None
-        return geometry
-
-    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
-               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
-        """Mitsuba's render, with the scene geometry built first (see
-        ``LathePathIntegrator.render``)."""
-        self.geometry(scene)
-        return super().render(scene, sensor, seed, spp, develop, evaluate)
+        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, self.plugin_name)
 
     @staticmethod
     def _heterogeneous(scene: mi.Scene) -> bool:

@@ -1,44 +1,5 @@
-"""The ``lathe_whitted`` integrator: Whitted ray tracing with exact lathes.
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``max_depth``
-     - integer
-     - Most surface interactions along one branch of the ray tree, >= 0.
-       1 renders only directly visible emitters, 2 adds direct light at the
-       first surface, 3 one specular bounce before it, and so on (as
-       ``lathe_path`` counts). A deep tree costs only where its branches
-       stay above ``cutoff`` (total internal reflection): the kernel and
-       the stack of pending branches do not grow with it. (Default: 10)
-   * - ``cutoff``
-     - float
-     - A branch whose throughput (largest channel, the product of the
-       Fresnel and BSDF weights along it) falls below this is not traced,
-       as POV-Ray's ``adc_bailout``; in [0, 1). (Default: 1/255)
-   * - ``shadows``
-     - string
-     - ``opaque`` (default): every surface blocks light, as Mitsuba's
-       dielectrics do for emitter samples. ``filtered``: light reaches a
-       point through dielectrics (and thin dielectrics) in a straight line,
-       attenuated at every crossing by the surface's transmittance (the
-       Fresnel transmittance from the outside at that angle, times
-       ``specular_transmittance``), without refraction, as POV-Ray's shadows
-       through transparent objects.
-   * - ``normal_check``
-     - string
-     - What to do where the interpolated shading normal contradicts the real
-       surface (docs/method.md, eq. 11), as in ``lathe_path``: ``none``,
-       ``terminate`` (the branch stops) or ``fallback`` (default: that
-       vertex is redone with the geometric normal).
-   * - ``hide_emitters``
-     - boolean
-     - Hide directly visible emitters as ``lathe_path`` does: camera rays go
-       on through the area emitters they meet first, and the environment
-       seen directly is black with alpha 0. (Default: false)
+"""The ``lathe_whitted`` integrator: Whitted ray tracing with exact lathes
+(parameters: :class:`LatheWhittedIntegrator`).
 
 The ray tree. Every camera ray starts a binary tree, deterministic but for
 mixed BSDFs and a full stack (both below):
@@ -97,9 +58,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .lathe_path import NORMAL_CHECKS, with_geometric_frame
+from .integrator_base import ExactLatheSamplingIntegrator, normal_check_parameter, with_geometric_frame
 from .line_walk import start_walk
-from .media_check import refuse_media
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -185,13 +145,55 @@ def sample_lobe(bsdf: mi.BSDF, si: mi.SurfaceInteraction3f, lobe: mi.BSDFFlags, 
     return bs, weight, exists
 
 
-class LatheWhittedIntegrator(mi.SamplingIntegrator):
-    """Whitted ray tracer that renders every ``lathe`` shape exactly (see
-    the module docstring for the parameters)."""
+class LatheWhittedIntegrator(ExactLatheSamplingIntegrator):
+    """Whitted ray tracer that renders every ``lathe`` shape exactly.
+
+    .. pluginparameters::
+
+     * - max_depth
+       - |int|
+       - Most surface interactions along one branch of the ray tree, >= 0.
+         1 renders only directly visible emitters, 2 adds direct light at the
+         first surface, 3 one specular bounce before it, and so on (as
+         ``lathe_path`` counts). A deep tree costs only where its branches
+         stay above ``cutoff`` (total internal reflection): the kernel and
+         the stack of pending branches do not grow with it. (Default: 10)
+
+     * - cutoff
+       - |float|
+       - A branch whose throughput (largest channel, the product of the
+         Fresnel and BSDF weights along it) falls below this is not traced,
+         as POV-Ray's ``adc_bailout``; in [0, 1). (Default: 1/255)
+
+     * - shadows
+       - |string|
+       - ``opaque``: every surface blocks light, as Mitsuba's dielectrics do
+         for emitter samples. ``filtered``: light reaches a point through
+         dielectrics (and thin dielectrics) in a straight line, attenuated at
+         every crossing by the surface's transmittance (the Fresnel
+         transmittance from the outside at that angle, times
+         ``specular_transmittance``), without refraction, as POV-Ray's shadows
+         through transparent objects. (Default: ``opaque``)
+
+     * - normal_check
+       - |string|
+       - What to do where the interpolated shading normal contradicts the real
+         surface (docs/method.md, eq. 11), as in ``lathe_path``: ``none``,
+         ``terminate`` (the branch stops) or ``fallback`` (that vertex is
+         redone with the geometric normal). (Default: ``fallback``)
+
+     * - hide_emitters
+       - |bool|
+       - Hide directly visible emitters as ``lathe_path`` does: camera rays go
+         on through the area emitters they meet first, and the environment
+         seen directly is black with alpha 0. (Default: false)
+    """
+
+    plugin_name = "lathe_whitted"
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
-        who = "lathe_whitted"
+        who = self.plugin_name
         self.max_depth = typed_property(props, "max_depth", int, 10, who)
         if self.max_depth < 0:
             raise ValueError(f"lathe_whitted: parameter 'max_depth' must be >= 0, got {self.max_depth}")
@@ -204,32 +206,8 @@ class LatheWhittedIntegrator(mi.SamplingIntegrator):
                 f"lathe_whitted: parameter 'shadows': unknown mode '{self.shadows}' "
                 f"(expected one of: {', '.join(SHADOW_MODES)})"
             )
-        self.normal_check = typed_property(props, "normal_check", str, "fallback", who)
+        self.normal_check = normal_check_parameter(props, who)
         self.hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
-        if self.normal_check not in NORMAL_CHECKS:
-            raise ValueError(
-                f"lathe_whitted: parameter 'normal_check': unknown policy '{self.normal_check}' "
-                f"(expected one of: {', '.join(NORMAL_CHECKS)})"
-            )
-        self._geometry = None
-
-    def geometry(self, scene: mi.Scene) -> ExactSceneGeometry:
-        """The exact-lathe ray queries of ``scene``, rebuilt when its shapes
-        change (:meth:`ExactSceneGeometry.for_scene`)."""
-        current = ExactSceneGeometry.for_scene(scene, self._geometry)
-        refuse_media(current.lathes, "lathe_whitted")
-        # A scene without lathes is its own geometry; it owns this
-        # integrator, so keeping it would make a reference cycle.
-        self._geometry = None if not current.lathes else current
-        return current
-
-    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
-               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
-        """Mitsuba's render after building the scene geometry, so that its
-        construction is not recorded into the render's kernel (see
-        ``lathe_path``)."""
-        self.geometry(scene)
-        return super().render(scene, sensor, seed, spp, develop, evaluate)
 
     @dr.syntax
     def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,

@@ -1,70 +1,5 @@
-"""The ``lathe`` shape plugin: a solid of revolution from a 2D profile.
-
-.. list-table::
-   :header-rows: 1
-
-   * - Parameter
-     - Type
-     - Description
-   * - ``filename``
-     - string
-     - Profile CSV file (columns ``r,z[,sharp]``, ``#`` comments, optional
-       header) or a ``.json``/``.toml`` arc profile spec (see
-       :mod:`lathe_shape.profiles.arcs`), resolved like Mitsuba's own file
-       names (relative to the scene file). Exactly one of ``filename`` and
-       ``profile``.
-   * - ``profile``
-     - string
-     - Inline profile ``"r z, r z, ..."`` (a third number per point, 0 or 1,
-       flags a sharp vertex).
-   * - ``kind``
-     - string
-     - Profile kind: ``polyline`` (default; the points are the polyline),
-       ``bspline`` (the points are uniform cubic B-spline control points:
-       closed periodic when the last equals the first, otherwise open with
-       tripled ends, which must then lie on the axis), or one of POV-Ray's
-       curves: ``bezier`` (4 points per segment), ``catmull_rom`` (POV-Ray's
-       ``cubic_spline``: the first and last points only set tangents),
-       ``quadratic`` (``quadratic_spline``) and ``sor`` (points ``(r, h)``,
-       ``r^2`` a cubic in ``h``, closed by flat discs unless ``open``). A
-       profile CSV may name its kind in a ``# kind: NAME`` comment line
-       (as ``lathe-profile --from-pov`` writes); the parameter, when given,
-       must agree.
-   * - ``open``
-     - boolean
-     - The profile is a single open sheet, not the outline of a solid
-       (default: false, or the CSV's ``# open: true``): its ends need not
-       meet or lie on the axis, and it has no inside. A ``sor`` drops its
-       end discs. Use BSDFs that need no inside and work on both sides
-       (``thindielectric``, or any BSDF inside a ``twosided``); a
-       ``dielectric`` or a one-sided BSDF (``diffuse``, ``conductor`` ...)
-       logs a warning.
-   * - ``crease_angle``
-     - float
-     - Corners of the profile turning by more than this many degrees keep a
-       sharp edge instead of smoothly interpolated normals (default: 30).
-   * - ``smooth``
-     - boolean
-     - Polylines: interpolate shading normals along the profile (the paper's
-       smooth shading, default: true); false renders flat cone frustums.
-       B-splines always use their exact normals.
-   * - ``mesh_segments``
-     - integer
-     - Azimuthal steps of the reference tessellation that stock integrators
-       render (default: 256, at least 3). A mesh that would take more than
-       half the available memory is refused, with the estimate.
-   * - ``reference``
-     - string
-     - ``mesh`` (default): the full reference mesh; ``proxy``: a light,
-       coarse stand-in (12 steps) for scenes of many lathes rendered
-       exactly with ``lathe_path``, which never traces the mesh (stock
-       integrators then render the proxy; keep ``mesh`` for emitting lathes).
-   * - ``to_world``
-     - transform
-     - Places the shape's local frame (axis = local +z) in the world.
-   * - ``flip_normals``
-     - boolean
-     - Flip the surface orientation, as for any Mitsuba shape.
+"""The ``lathe`` shape plugin: a solid of revolution from a 2D profile
+(parameters: :class:`LatheShape`).
 
 Nested ``<bsdf>`` and ``<emitter>`` work as for any shape (``lathe_path``
 does not handle participating media). An emitting lathe is traced as its
@@ -231,7 +166,79 @@ def _finish_pending() -> None:
 
 class LatheShape(mi.Mesh):
     """A solid of revolution: reference mesh for stock integrators, exact
-    intersection through :meth:`ray_intersect_exact` (see module docstring)."""
+    intersection through :meth:`ray_intersect_exact`.
+
+    .. pluginparameters::
+
+     * - filename
+       - |string|
+       - Profile CSV file (columns ``r,z[,sharp]``, ``#`` comments, optional
+         header) or a ``.json``/``.toml`` arc profile spec (see
+         :mod:`lathe_shape.profiles.arcs`), resolved like Mitsuba's own file
+         names (relative to the scene file). Exactly one of ``filename`` and
+         ``profile``.
+
+     * - profile
+       - |string|
+       - Inline profile ``"r z, r z, ..."`` (a third number per point, 0 or 1,
+         flags a sharp vertex).
+
+     * - kind
+       - |string|
+       - Profile kind: ``polyline`` (default; the points are the polyline),
+         ``bspline`` (the points are uniform cubic B-spline control points:
+         closed periodic when the last equals the first, otherwise open with
+         tripled ends, which must then lie on the axis), or one of POV-Ray's
+         curves: ``bezier`` (4 points per segment), ``catmull_rom`` (POV-Ray's
+         ``cubic_spline``: the first and last points only set tangents),
+         ``quadratic`` (``quadratic_spline``) and ``sor`` (points ``(r, h)``,
+         ``r^2`` a cubic in ``h``, closed by flat discs unless ``open``). A
+         profile CSV may name its kind in a ``# kind: NAME`` comment line
+         (as ``lathe-profile --from-pov`` writes); the parameter, when given,
+         must agree.
+
+     * - open
+       - |bool|
+       - The profile is a single open sheet, not the outline of a solid
+         (default: false, or the CSV's ``# open: true``): its ends need not
+         meet or lie on the axis, and it has no inside. A ``sor`` drops its
+         end discs. Use BSDFs that need no inside and work on both sides
+         (``thindielectric``, or any BSDF inside a ``twosided``); a
+         ``dielectric`` or a one-sided BSDF (``diffuse``, ``conductor`` ...)
+         logs a warning.
+
+     * - crease_angle
+       - |float|
+       - Corners of the profile turning by more than this many degrees keep a
+         sharp edge instead of smoothly interpolated normals (default: 30).
+
+     * - smooth
+       - |bool|
+       - Polylines: interpolate shading normals along the profile (the paper's
+         smooth shading, default: true); false renders flat cone frustums.
+         B-splines always use their exact normals.
+
+     * - mesh_segments
+       - |int|
+       - Azimuthal steps of the reference tessellation that stock integrators
+         render (default: 256, at least 3). A mesh that would take more than
+         half the available memory is refused, with the estimate.
+
+     * - reference
+       - |string|
+       - ``mesh`` (default): the full reference mesh; ``proxy``: a light,
+         coarse stand-in (12 steps) for scenes of many lathes rendered
+         exactly with ``lathe_path``, which never traces the mesh (stock
+         integrators then render the proxy; keep ``mesh`` for emitting lathes).
+
+     * - to_world
+       - |transform|
+       - Places the shape's local frame (axis = local +z) in the world.
+
+     * - flip_normals
+       - |bool|
+       - Flip the surface orientation, as for any Mitsuba shape.
+    """
 
     def __init__(self, props: mi.Properties) -> None:
         with _constructing() as outermost:
