@@ -110,6 +110,10 @@ def registered_plugins() -> list[tuple[str, str, type]]:
         for kind, name, where in FALLBACK:
             module, cls = where.split(":")
             found.append((kind, name, getattr(importlib.import_module(module), cls)))
+    # Shapes first, then integrators, then BSDFs and the rest, each kind in
+    # registration order.
+    kinds = ["shape", "integrator", "bsdf"]
+    found.sort(key=lambda entry: kinds.index(entry[0]) if entry[0] in kinds else len(kinds))
     _plugins = found
     return found
 
