@@ -21,12 +21,22 @@ per-segment B-spline cubics (:mod:`.profiles.spline_kinds`), and ``sor``
 
 Every kind but ``sor`` may be a single open sheet (``open_sheet``): a curve
 whose ends are not joined, with no inside.
+
+The registry of profile kinds: one :class:`Kind` record per kind in
+:data:`KINDS` carries all that the package knows of it (the factory that
+validates the points and builds the surface, the surface class, the kernel
+layout its lathe sets use, which kernel family its attached and outline code
+follows, whether its points are differentiable, its ``lathe-profile --kind``
+name). The plugin, the scene geometry, the differentiable code and the CLI
+read the record; :func:`register_kind` adds a kind.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Protocol
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import mitsuba as mi
 import numpy as np
@@ -50,6 +60,7 @@ from .kernels.polyline import (
     profile_polyline_data,
     walk_and_test_polyline,
 )
+from .kernels.top_level import BSPLINE_LAYOUT, POLYLINE_LAYOUT, KindLayout
 from .profiles import bspline as bs
 from .profiles.bspline import BSplineProfile, make_bspline_profile
 from .profiles.polyline import Profile, ProfileError, make_profile
@@ -57,8 +68,8 @@ from .profiles.sor import SorProfile, make_sor_profile
 from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
-__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SorSurface", "SURFACE_KINDS",
-           "make_surface"]
+__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SorSurface", "Kind", "KINDS", "SURFACE_KINDS",
+           "cli_kind_names", "get_kind", "kind_of", "make_surface", "register_kind", "unregister_kind"]
 
 
 class Surface(Protocol):
@@ -70,6 +81,20 @@ class Surface(Protocol):
     smooth: bool
     #: The validated profile (numpy only).
     profile: Profile | BSplineProfile
+    #: The user's input it was built from, where the ``lathe`` plugin keeps
+    #: it (a ``plugin.profile_param.ProfileInput``, set by
+    #: ``remember_input``; absent on surfaces built otherwise).
+    given: Any
+
+    @property
+    def data(self) -> Any:
+        """The kernel's opaque buffers (``PolylineData``, ``BSplineData``),
+        built on first use; the kind's layout (:attr:`Kind.layout`) says how
+        lathe sets concatenate them."""
+
+    def mesh_rings(self) -> int:
+        """Profile rings of the full reference mesh, at most (its memory
+        estimate)."""
 
     def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
         """The reference mesh with ``steps`` azimuthal steps (local frame),
@@ -160,6 +185,10 @@ class PolylineSurface(_KernelSurface):
     def _build_data(self) -> PolylineData:
         return profile_polyline_data(self.profile, self.smooth)
 
+    def mesh_rings(self) -> int:
+        """Two per segment (where every vertex is a crease)."""
+        return 2 * self.profile.segment_count
+
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return polyline_geometry(self.data, p, seg, u, self.smooth)
 
@@ -227,6 +256,10 @@ class BSplineSurface(_KernelSurface):
             points[-1] = points[0]  # bit-identical seam positions
         return points, normals, v
 
+    def mesh_rings(self) -> int:
+        """One per adaptive sample (:attr:`profile_samples`)."""
+        return len(self.profile_samples[0])
+
     def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
         points, normals, v = self.profile_samples
         start = np.arange(len(points) - 1)
@@ -264,28 +297,124 @@ def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth,
     return PolylineSurface(profile, smooth)
 
 
-def _smooth_curve_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    """B-spline, Bezier, Catmull-Rom, quadratic and sor profiles."""
+def _no_sharp(kind: str, sharp: np.ndarray, labels) -> None:
+    """The curve kinds are smooth: no sharp flags."""
     if np.any(sharp):
         k = int(np.argmax(sharp))
         raise ProfileError(
             f"{labels[k]}: sharp flags are not supported for kind '{kind}' (the curve is smooth)"
         )
-    if kind == "sor":
-        return SorSurface(make_sor_profile(points, source, open_sheet))
-    if kind == "bspline":
-        if open_sheet:
-            raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
-                               f"'catmull_rom' for an open sheet")
-        return BSplineSurface(make_bspline_profile(points, source))
+
+
+def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
+    _no_sharp(kind, sharp, labels)
+    if open_sheet:
+        raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
+                           f"'catmull_rom' for an open sheet")
+    return BSplineSurface(make_bspline_profile(points, source))
+
+
+def _cubic_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
+    """Bezier, Catmull-Rom and quadratic profiles (converted to B-spline cubics)."""
+    _no_sharp(kind, sharp, labels)
     return BSplineSurface(make_cubic_profile(kind, points, source, open_sheet))
 
 
-#: The registry of profile kinds: the ``kind`` parameter's values and the
-#: factory that validates the points and builds the surface.
-SURFACE_KINDS = {"polyline": _polyline_surface, "bspline": _smooth_curve_surface,
-                 **{kind: _smooth_curve_surface for kind in CUBIC_KINDS},
-                 "sor": _smooth_curve_surface}
+def _sor_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
+    _no_sharp(kind, sharp, labels)
+    return SorSurface(make_sor_profile(points, source, open_sheet))
+
+
+#: A kind's factory: ``(kind, points, sharp, labels, source, crease_angle,
+#: smooth, open_sheet) -> Surface`` (see :func:`make_surface`).
+SurfaceFactory = Callable[[str, np.ndarray, np.ndarray, list, str, float, bool, bool], Surface]
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One profile kind: all that the package knows of it.
+
+    ``name``: the ``lathe`` plugin's ``kind`` value (and the surfaces'
+    ``kind``); ``factory``: validates the points and builds the surface
+    (:data:`SurfaceFactory`); ``surface_class``: the class it builds;
+    ``layout``: the kernel layout (``kernels.top_level``) by which lathe
+    sets of this kind concatenate their data (lathes of one layout share a
+    set); ``kernel``: the kernel family, ``"polyline"`` or ``"bspline"``,
+    whose attached hits, profile points and outlines the differentiable code
+    uses; ``differentiable``: whether hits are attached to the points (the
+    ``points`` parameter has derivatives); ``cli_name``: the
+    ``lathe-profile --kind`` value (None: not offered there)."""
+
+    name: str
+    factory: SurfaceFactory
+    surface_class: type
+    layout: KindLayout
+    kernel: str
+    differentiable: bool = False
+    cli_name: str | None = None
+
+    @property
+    def seg_stride(self) -> int:
+        """Floats per profile segment in the kernel's first segment buffer."""
+        return next(iter(self.layout.seg_buffers.values()))
+
+    @property
+    def leaf_stride(self) -> int | None:
+        """Floats per BVH leaf record (None: the leaves are segments)."""
+        return next(iter(self.layout.leaf_buffers.values()), None)
+
+
+#: The registry of profile kinds, by name (:func:`register_kind` adds one).
+KINDS: dict[str, Kind] = {}
+
+#: (the former name of the registry)
+SURFACE_KINDS = KINDS
+
+
+def register_kind(kind: Kind, replace: bool = False) -> Kind:
+    """Add ``kind`` to :data:`KINDS` (``replace``: also over a kind of the
+    same name); returns it."""
+    if kind.kernel not in ("polyline", "bspline"):
+        raise ValueError(f"kind '{kind.name}': unknown kernel family '{kind.kernel}'")
+    if kind.name in KINDS and not replace:
+        raise ValueError(f"profile kind '{kind.name}' is registered already")
+    KINDS[kind.name] = kind
+    return kind
+
+
+def unregister_kind(name: str) -> None:
+    """Remove the kind ``name`` from :data:`KINDS`."""
+    del KINDS[name]
+
+
+def get_kind(name: str, source: str = "lathe") -> Kind:
+    """The record of the kind ``name``; a :class:`ProfileError` naming
+    ``source`` and the known kinds if there is none."""
+    kind = KINDS.get(name)
+    if kind is None:
+        raise ProfileError(
+            f"{source}: unknown profile kind '{name}' (expected one of: {', '.join(KINDS)})"
+        )
+    return kind
+
+
+def kind_of(surface: Surface) -> Kind:
+    """The record of ``surface``'s kind."""
+    return KINDS[surface.kind]
+
+
+def cli_kind_names() -> tuple[str, ...]:
+    """The ``lathe-profile --kind`` values, in registration order."""
+    return tuple(kind.cli_name for kind in KINDS.values() if kind.cli_name)
+
+
+register_kind(Kind("polyline", _polyline_surface, PolylineSurface, POLYLINE_LAYOUT, "polyline",
+                   differentiable=True, cli_name="polyline"))
+register_kind(Kind("bspline", _bspline_surface, BSplineSurface, BSPLINE_LAYOUT, "bspline",
+                   differentiable=True, cli_name="bspline"))
+for _name in CUBIC_KINDS:
+    register_kind(Kind(_name, _cubic_surface, BSplineSurface, BSPLINE_LAYOUT, "bspline", cli_name=_name))
+register_kind(Kind("sor", _sor_surface, SorSurface, BSPLINE_LAYOUT, "bspline", cli_name="sor"))
 
 
 def make_surface(
@@ -297,15 +426,14 @@ def make_surface(
     crease_angle: float = 30.0,
     smooth: bool = True,
     open_sheet: bool = False,
-) -> PolylineSurface | BSplineSurface:
+) -> Surface:
     """Validate the points (once) as a profile of ``kind`` and build its
-    surface. ``labels[k]`` names point ``k`` and ``source`` the file or
-    parameter in error messages; ``crease_angle`` and ``smooth`` concern
-    polylines only (the curve kinds have exact normals); ``open_sheet``
-    makes the profile a single open sheet (``sor``: POV-Ray's ``open``, no
-    end discs)."""
-    if kind not in SURFACE_KINDS:
-        raise ProfileError(
-            f"{source}: unknown profile kind '{kind}' (expected one of: {', '.join(SURFACE_KINDS)})"
-        )
-    return SURFACE_KINDS[kind](kind, points, sharp, labels, source, crease_angle, smooth, open_sheet)
+    surface (its kind's factory, :data:`KINDS`). ``labels[k]`` names point
+    ``k`` and ``source`` the file or parameter in error messages;
+    ``crease_angle`` and ``smooth`` concern polylines only (the curve kinds
+    have exact normals); ``open_sheet`` makes the profile a single open
+    sheet (``sor``: POV-Ray's ``open``, no end discs)."""
+    record = get_kind(kind, source)
+    surface = record.factory(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet)
+    surface.kind = record.name
+    return surface

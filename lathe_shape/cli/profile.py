@@ -24,10 +24,15 @@ import sys
 
 from .common import CliError, run_command
 
-__all__ = ["MAX_POLYLINE_POINTS", "PROFILE_KINDS", "main", "build_parser"]
+__all__ = ["MAX_POLYLINE_POINTS", "main", "build_parser", "profile_kinds"]
 
-#: The ``--kind`` values (the lathe plugin's kinds).
-PROFILE_KINDS = ("polyline", "bspline", "bezier", "catmull_rom", "quadratic", "sor")
+
+def profile_kinds() -> dict:
+    """The ``--kind`` values and their profile kinds' records (the kinds'
+    ``cli_name``, :data:`lathe_shape.surfaces.KINDS`)."""
+    from ..surfaces import KINDS
+
+    return {kind.cli_name: kind for kind in KINDS.values() if kind.cli_name}
 
 #: Most points ``--to-polyline`` writes (the polyline is validated as a
 #: profile, and written as text: a million points is about 20 MB of CSV).
@@ -42,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("input", nargs="?",
                         help="profile file (CSV r,z[,sharp], or a .json/.toml arc spec)")
-    parser.add_argument("--kind", choices=PROFILE_KINDS, default=None,
+    parser.add_argument("--kind", choices=tuple(profile_kinds()), default=None,
                         help="how to read the points (default: the CSV's '# kind:' line, else polyline)")
     parser.add_argument("--open", action="store_true",
                         help="the profile is a single open sheet (default: the CSV's '# open:' line)")
@@ -77,19 +82,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def describe_polyline(path: str, points, sharp, labels, crease_angle: float,
-                      open_sheet: bool = False) -> str:
-    """Validate polyline points; the one-line summary."""
+                      open_sheet: bool = False, polyline=None, kind: str = "polyline") -> str:
+    """Validate polyline points (unless ``polyline``, the validated profile
+    of a kind ``kind`` that runs the polyline kernel, is given); the
+    one-line summary."""
     import numpy as np
 
     from ..profiles import make_profile
 
-    polyline = make_profile(points, sharp, labels, source=path, crease_angle=crease_angle,
-                            open_sheet=open_sheet)
+    if polyline is None:
+        polyline = make_profile(points, sharp, labels, source=path, crease_angle=crease_angle,
+                                open_sheet=open_sheet)
     r_max, z_min, z_max = polyline.bounds()
     form = ("open sheet" if open_sheet else
             "closed loop" if polyline.closed_loop else "both ends on the axis")
     creases = int(np.sum(np.any(polyline.normal_end[:-1] != polyline.normal_start[1:], axis=1)))
-    return (f"{path}: valid polyline profile, {len(polyline.points)} points, "
+    return (f"{path}: valid {kind} profile, {len(polyline.points)} points, "
             f"{polyline.segment_count} surface segments, {form}, r <= {r_max:g}, "
             f"z in [{z_min:g}, {z_max:g}], {creases} creases at {crease_angle:g} deg")
 
@@ -169,15 +177,26 @@ def check_or_convert(args: argparse.Namespace) -> int:
                           strict_curves=args.strict_curves)
     points, sharp, labels = read_points(args.input)
     declared = read_profile_options(args.input)
-    kind = args.kind or declared.get("kind", "polyline")
+    kinds = profile_kinds()
+    if args.kind is not None:
+        record = kinds[args.kind]
+    else:
+        name = declared.get("kind", "polyline")
+        record = next((k for k in kinds.values() if k.name == name), None)
+        if record is None:
+            raise CliError(f"{args.input}: unknown profile kind '{name}' (expected one of: "
+                           f"{', '.join(k.name for k in kinds.values())})")
+    kind = record.name
     open_sheet = args.open or declared.get("open", False)
-    if kind not in PROFILE_KINDS:
-        raise CliError(f"{args.input}: unknown profile kind '{kind}' (expected one of: "
-                       f"{', '.join(PROFILE_KINDS)})")
-    if kind == "polyline":
+    if record.kernel == "polyline":
         if args.to_polyline is not None:
             raise CliError("--to-polyline needs a curve --kind (the input is already a polyline)")
-        print(describe_polyline(args.input, points, sharp, labels, args.crease_angle, open_sheet))
+        polyline = None
+        if kind != "polyline":
+            polyline = make_surface(kind, points, sharp, labels, args.input, args.crease_angle,
+                                    open_sheet=open_sheet).profile
+        print(describe_polyline(args.input, points, sharp, labels, args.crease_angle, open_sheet,
+                                polyline, kind))
         return 0
     if kind == "bspline" and not open_sheet:
         spline = make_bspline_profile(points, args.input)

@@ -160,12 +160,13 @@ def attached_bspline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t: 
     return AttachedHit(t_att, p, n, mi.Vector3f(n))
 
 
-def profile_point(points: mi.Float, index, kind: str, seg: mi.UInt32,
+def profile_point(points: mi.Float, index, kernel: str, seg: mi.UInt32,
                   u: mi.Float) -> tuple[mi.Float, mi.Float]:
     """``(R, Z)`` of the profile at ``(seg, u)``, attached to ``points``
-    (a polyline's segment is ``p0 + u (p1 - p0)``; a B-spline's eq. 12)."""
+    (``kernel``: the kind's kernel, ``"polyline"``, whose segment is
+    ``p0 + u (p1 - p0)``, or ``"bspline"``, eq. 12)."""
     active = mi.Bool(True)
-    if kind == "bspline":
+    if kernel == "bspline":
         controls = [_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k), active)
                     for k in range(4)]
         value, _ = _curve(controls, u)

@@ -166,18 +166,24 @@ __all__ = [
     "count_crossings_bspline",
     "next_crossing_bspline",
     "bspline_geometry",
+    "STRIDE",
+    "LEAF_STRIDE",
 ]
 
 #: Floats per segment in ``BSplineData.seg``: R0..R3, Z0..Z3 (ascending
 #: powers of t).
-_STRIDE = 8
+STRIDE = 8
 
 #: Floats per leaf in ``BSplineData.leaf`` (three Vector4f): Bezier control
 #: values R_b0..3 and Z_b0..3 (in the leaf's parameter u; the kernel derives
 #: the power form from them, :func:`_bezier_to_power`), then (t0, h,
 #: segment, r_squared): the last is 1 where the R slots hold R^2 (the sor
 #: kind; the kernel reads the flag from ``BSplineData``, see :func:`_squared`).
-_LEAF_STRIDE = 12
+LEAF_STRIDE = 12
+
+# (the former private names, for older importers)
+_STRIDE = STRIDE
+_LEAF_STRIDE = LEAF_STRIDE
 
 #: Longest leaf, in segment parameter t (before padding).
 _LEAF_T = 0.25
@@ -225,8 +231,8 @@ class BSplineData(LatheData):
     """Packed, opaque buffers of one B-spline lathe (local frame).
 
     Attributes (besides those of :class:`~lathe_shape.kernels.common.LatheData`):
-        seg: ``mi.Float`` of ``n_seg * 8`` values (see ``_STRIDE``).
-        leaf: ``mi.Float`` of ``n_leaf * 12`` values (see ``_LEAF_STRIDE``).
+        seg: ``mi.Float`` of ``n_seg * 8`` values (see ``STRIDE``).
+        leaf: ``mi.Float`` of ``n_leaf * 12`` values (see ``LEAF_STRIDE``).
         nodes: ``mi.Float``, 4 values per node of the four threaded BVH
             copies: the annular box ``(rmax, rmin^2, zmin, zmax)``.
         links: ``mi.UInt32`` per node: an inner node's miss link, or
@@ -383,7 +389,7 @@ def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
     recs, links, n_nodes = threaded_bvh(boxes, record, lambda k, b: record(b))
 
     return BSplineData(
-        seg=opaque(coef.reshape(n_seg, _STRIDE).ravel()),
+        seg=opaque(coef.reshape(n_seg, STRIDE).ravel()),
         leaf=opaque(np.asarray(leaves).ravel()),
         nodes=opaque(np.asarray(recs).ravel()),
         links=opaque(np.asarray(links, dtype=np.uint32), mi.UInt32),
@@ -823,7 +829,7 @@ class _Leaf:
     form follows from them in a few operations (fewer loads)."""
 
     def __init__(self, data: BSplineData, node, leaf, ray: _Ray, m):
-        base = leaf * (_LEAF_STRIDE // 4)
+        base = leaf * (LEAF_STRIDE // 4)
         Rb = dr.gather(mi.Vector4f, data.leaf, base, m)
         Zb = dr.gather(mi.Vector4f, data.leaf, base + 1, m)
         self.leaf = leaf
@@ -1063,15 +1069,15 @@ def _trace(data: BSplineData, ray: _Ray, shadow: bool = False):
 def _leaf_to_segment(data: BSplineData, best: _Best, active):
     """The segment of the crossing ``best`` and its parameter there, ``t =
     t0 + h u`` (the leaf's placement in its segment)."""
-    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (_LEAF_STRIDE // 4) + 2, active)
+    meta = dr.gather(mi.Vector4f, data.leaf, best.leaf * (LEAF_STRIDE // 4) + 2, active)
     return mi.UInt32(meta.z), dr.fma(meta.y, best.u, meta.x)
 
 
 def _segment_cubics(data: BSplineData, seg, active) -> tuple[list, list]:
     """Power coefficients of ``R`` (or ``R^2``) and ``Z`` of segment
     ``seg``: two loads of four adjacent floats."""
-    R = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4), active)
-    Z = dr.gather(mi.Vector4f, data.seg, seg * (_STRIDE // 4) + 1, active)
+    R = dr.gather(mi.Vector4f, data.seg, seg * (STRIDE // 4), active)
+    Z = dr.gather(mi.Vector4f, data.seg, seg * (STRIDE // 4) + 1, active)
     return [R.x, R.y, R.z, R.w], [Z.x, Z.y, Z.z, Z.w]
 
 

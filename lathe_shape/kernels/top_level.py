@@ -60,7 +60,8 @@ from .common import (
 #: The ``lathe`` of a :class:`CrossingPlace` that is no lathe's crossing.
 NO_LATHE = 0xFFFFFFFF
 
-__all__ = ["KINDS", "NO_LATHE", "CrossingPlace", "KindLayout", "LatheSet", "ProfileTable", "SetHit",
+__all__ = ["BSPLINE_LAYOUT", "LAYOUTS", "NO_LATHE", "POLYLINE_LAYOUT",
+           "CrossingPlace", "KindLayout", "LatheSet", "ProfileTable", "SetHit",
            "octant_bvh"]
 
 
@@ -114,20 +115,24 @@ class KindLayout:
 
 _FRAME = ("n_nodes", "bound_r", "bound_z_lo", "bound_z_hi", "scale", "inv_scale", "z_shift")
 
-#: The layout of every kernel kind, by the ``kind`` name of the surfaces.
-KINDS = {
-    "polyline": KindLayout(8, {"seg_geo": 4, "seg_sh": 4, "seg_arc": 2, "seg_side": 8}, {}, True, None,
-                           _FRAME + ("tol",), polyline.intersect_polyline, polyline.occluded_polyline,
-                           _polyline_geometry, polyline.next_crossing_polyline),
-    # A B-spline leaf record ends with (t0, h, segment, r_squared): see kernels/bspline.py.
-    # The per-profile r_squared_flag lets one kernel serve R and R^2 (sor) profiles.
-    "bspline": KindLayout(4, {"seg": bspline._STRIDE}, {"leaf": bspline._LEAF_STRIDE}, False,
-                          bspline._LEAF_STRIDE - 2, _FRAME + ("n_seg", "r_squared_flag"),
-                          bspline.intersect_bspline, bspline.occluded_bspline, _bspline_geometry,
-                          bspline.next_crossing_bspline),
-}
-# The other cubic kinds (surfaces.py) run the B-spline kernel on its data.
-KINDS.update({kind: KINDS["bspline"] for kind in ("bezier", "catmull_rom", "quadratic", "sor")})
+#: The layout of the polyline kernel (paper Method 1).
+POLYLINE_LAYOUT = KindLayout(8, {"seg_geo": 4, "seg_sh": 4, "seg_arc": 2, "seg_side": 8}, {}, True, None,
+                             _FRAME + ("tol",), polyline.intersect_polyline, polyline.occluded_polyline,
+                             _polyline_geometry, polyline.next_crossing_polyline)
+
+#: The layout of the B-spline kernel (paper Method 2), which every cubic
+#: profile kind runs. A leaf record ends with (t0, h, segment, r_squared):
+#: see kernels/bspline.py. The per-profile r_squared_flag lets one kernel
+#: serve R and R^2 (sor) profiles.
+BSPLINE_LAYOUT = KindLayout(4, {"seg": bspline.STRIDE}, {"leaf": bspline.LEAF_STRIDE}, False,
+                            bspline.LEAF_STRIDE - 2, _FRAME + ("n_seg", "r_squared_flag"),
+                            bspline.intersect_bspline, bspline.occluded_bspline, _bspline_geometry,
+                            bspline.next_crossing_bspline)
+
+#: The kernels' layouts by kernel name. Which profile kind runs which kernel
+#: is the profile kinds' registry's business (``lathe_shape.surfaces.KINDS``:
+#: each kind's record carries its layout).
+LAYOUTS = {"polyline": POLYLINE_LAYOUT, "bspline": BSPLINE_LAYOUT}
 
 
 def _host(value) -> np.ndarray:
@@ -135,7 +140,8 @@ def _host(value) -> np.ndarray:
 
 
 class ProfileTable:
-    """The kernel data of several profiles of one kind, concatenated.
+    """The kernel data of several profiles of one kernel layout (``layout``:
+    a :class:`KindLayout`, or its name in :data:`LAYOUTS`), concatenated.
 
     ``buffers``: the concatenated node, link, segment and leaf buffers;
     ``bases``: per profile, opaque UInt32 arrays ``node_base`` and
@@ -144,8 +150,8 @@ class ProfileTable:
     profile, whether shading normals are interpolated; ``boxes``: (n, 6)
     float64 local bounding boxes (the padded bounding cylinders)."""
 
-    def __init__(self, kind: str, datas: Sequence[LatheData], smooth: Sequence[bool]) -> None:
-        layout = self.layout = KINDS[kind]
+    def __init__(self, layout: KindLayout | str, datas: Sequence[LatheData], smooth: Sequence[bool]) -> None:
+        layout = self.layout = LAYOUTS[layout] if isinstance(layout, str) else layout
         count = {"node": [len(_host(d.links)) // 4 for d in datas]}
         for unit, buffers in (("seg", layout.seg_buffers), ("leaf", layout.leaf_buffers)):
             name, floats = next(iter(buffers.items()), (None, 1))

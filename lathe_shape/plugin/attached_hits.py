@@ -15,12 +15,16 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels.attached import AttachedHit, attached_bspline, attached_polyline
+from ..surfaces import KINDS, kind_of
 from .shape import LatheShape
 
-__all__ = ["DIFFERENTIABLE_KINDS", "attach_lathe_hits", "differentiable_lathes", "lathe_hit"]
+__all__ = ["attach_lathe_hits", "differentiable_kinds", "differentiable_lathes", "lathe_hit"]
 
-#: Profile kinds whose hits are attached to their points.
-DIFFERENTIABLE_KINDS = ("polyline", "bspline")
+
+def differentiable_kinds() -> tuple[str, ...]:
+    """Profile kinds whose hits are attached to their points (their
+    records' ``differentiable``, :data:`lathe_shape.surfaces.KINDS`)."""
+    return tuple(name for name, kind in KINDS.items() if kind.differentiable)
 
 
 def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, active: mi.Bool) -> AttachedHit:
@@ -29,7 +33,7 @@ def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, act
     o = lathe._to_local @ ray.o
     d = lathe._to_local @ ray.d
     t = dr.select(active, si.t, 0.0)
-    if lathe.surface.kind == "bspline":
+    if kind_of(lathe.surface).kernel == "bspline":
         n_seg = lathe.profile.segment_count
         # The kernel's curve parameter, from uv.y = (seg + u) / n_seg
         u = si.uv.y * n_seg - mi.Float(si.prim_index)
@@ -41,17 +45,17 @@ def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, act
 
 def differentiable_lathes(lathes: list[LatheShape]) -> list[LatheShape]:
     """The lathes whose hits and outlines follow their ``points`` (kinds
-    :data:`DIFFERENTIABLE_KINDS`). The other kinds' hits depend on no
+    :func:`differentiable_kinds`). The other kinds' hits depend on no
     differentiated parameter; a gradient asked of their points is refused."""
     for lathe in lathes:
         with dr.resume_grad():  # mi.render's primal pass suspends gradients
             asked = dr.grad_enabled(lathe.profile_points)
-        if lathe.surface.kind not in DIFFERENTIABLE_KINDS and asked:
+        if not kind_of(lathe.surface).differentiable and asked:
             raise ValueError(
                 f"lathe '{lathe.id()}': gradients with respect to parameter 'points' are available "
-                f"for the kinds {' and '.join(DIFFERENTIABLE_KINDS)}, not '{lathe.surface.kind}'"
+                f"for the kinds {' and '.join(differentiable_kinds())}, not '{lathe.surface.kind}'"
             )
-    return [lathe for lathe in lathes if lathe.surface.kind in DIFFERENTIABLE_KINDS]
+    return [lathe for lathe in lathes if kind_of(lathe.surface).differentiable]
 
 
 def attach_lathe_hits(lathes: list[LatheShape], ray: mi.Ray3f,

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..profiles import ProfileError
 from ..profiles.text import PointLabels
-from ..surfaces import BSplineSurface, PolylineSurface, make_surface
+from ..surfaces import BSplineSurface, PolylineSurface, kind_of, make_surface
 
 __all__ = ["ProfileInput", "ProfileIndex", "profile_index", "rebuild_surface", "remember_input"]
 
@@ -164,7 +164,7 @@ def profile_index(surface: PolylineSurface | BSplineSurface) -> ProfileIndex:
     """The :class:`ProfileIndex` of a surface built with :func:`remember_input`."""
     given = surface.given
     profile = surface.profile
-    if surface.kind == "bspline":
+    if kind_of(surface).kernel == "bspline":
         seg = _bspline_controls(given, profile)
         controls = mi.UInt32(seg.ravel().astype(np.uint32))
         dr.make_opaque(controls)

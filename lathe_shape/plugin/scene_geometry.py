@@ -65,7 +65,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..kernels.common import NO_CROSSING, after_t_with_ties, opaque
-from ..kernels.top_level import KINDS, NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
+from ..kernels.top_level import NO_LATHE, CrossingPlace, LatheSet, ProfileTable, SetHit
+from ..surfaces import kind_of
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
 from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
@@ -91,7 +92,7 @@ class ExactSceneGeometry:
         for lathe in self.lathes:
             # Kinds of one kernel layout (the B-spline kernel's cubic kinds)
             # share a set.
-            by_kind.setdefault(id(KINDS[lathe.surface.kind]), []).append(lathe)
+            by_kind.setdefault(id(kind_of(lathe.surface).layout), []).append(lathe)
         #: Lathes intersected by their own kernel (the only one of their kind).
         self.single = [group[0] for group in by_kind.values() if len(group) == 1]
         #: Kinds of several lathes, each intersected as one set.
@@ -524,7 +525,7 @@ class LatheGroup:
                 profiles[key] = len(first)
                 first.append(lathe)
             profile_of.append(profiles[key])
-        table = ProfileTable(lathes[0].surface.kind, [lathe.surface.data for lathe in first],
+        table = ProfileTable(kind_of(lathes[0].surface).layout, [lathe.surface.data for lathe in first],
                              [lathe.surface.smooth for lathe in first])
         self._matrices = [lathe.to_world_matrix for lathe in lathes]
         # The surfaces the profile table was built from (a new 'points'

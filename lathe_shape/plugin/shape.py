@@ -26,7 +26,7 @@ import numpy as np
 
 from ..kernels.common import LatheGeometry
 from ..profiles import ProfileError, parse_profile_string, read_points, read_profile_options
-from ..surfaces import SURFACE_KINDS, BSplineSurface, PolylineSurface, make_surface
+from ..surfaces import KINDS, BSplineSurface, PolylineSurface, make_surface
 from .interaction import lathe_interaction
 from .params import (
     check_traceable_scale,
@@ -86,10 +86,10 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
     declared = read_profile_options(source) if "filename" in props else {}
     kind = _option(props, "kind", str, declared, "polyline", who, source)
     open_sheet = _option(props, "open", bool, declared, False, who, source)
-    if kind not in SURFACE_KINDS:
+    if kind not in KINDS:
         raise ValueError(
             f"{who}: parameter 'kind': unknown profile kind '{kind}' "
-            f"(expected one of: {', '.join(SURFACE_KINDS)})"
+            f"(expected one of: {', '.join(KINDS)})"
         )
     surface = make_surface(kind, points, sharp, labels, source, crease, smooth, open_sheet)
     # Kept for the differentiable 'points' parameter (profile_param.py).
@@ -114,10 +114,7 @@ def _ring_bound(surface: PolylineSurface | BSplineSurface, reference: str = "mes
     """Profile rings of the reference mesh, at most (polylines: two per
     segment where every vertex is a crease; B-splines: their samples; a
     proxy: two per band it keeps)."""
-    if isinstance(surface, BSplineSurface):
-        rings = len(surface.profile_samples[0])
-    else:
-        rings = 2 * surface.profile.segment_count
+    rings = surface.mesh_rings()
     bands = reference_bands(reference)
     return rings if bands is None else min(rings, 2 * bands)
 

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..kernels.attached import profile_point
 from ..profiles import bspline as bs
+from ..surfaces import kind_of
 from .attached_hits import differentiable_lathes
 from .shape import LatheShape
 
@@ -89,7 +90,7 @@ def _world(lathe: LatheShape, r, z, phi) -> np.ndarray:
 
 def _curve_numpy(lathe: LatheShape, seg: np.ndarray, u: np.ndarray):
     """``(R, Z, n_r, n_z)`` of the canonical profile at ``(seg, u)``."""
-    if lathe.surface.kind == "bspline":
+    if kind_of(lathe.surface).kernel == "bspline":
         controls = lathe.profile.segment_controls
         r, z = bs.evaluate(controls, seg, u)
         dr_, dz_ = bs.derivative(controls, seg, u)
@@ -222,7 +223,7 @@ def outline_samples(sensor: mi.Sensor, lathes: list[LatheShape]) -> OutlineSampl
         center = lathe.to_world_matrix[:3, 3]
         size = max(width, height) / max(np.linalg.norm(origin - center), 1e-6)
         _segment_outlines(out, sensor, lathe, camera[:3], size)
-        if lathe.surface.kind == "polyline":
+        if kind_of(lathe.surface).kernel == "polyline":
             _joint_outlines(out, sensor, lathe, camera[:3], size)
     return out
 
@@ -231,7 +232,7 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
                                phi) -> tuple[mi.Point2f, mi.Point3f]:
     """Image positions and world points of the material points, attached to
     the profile."""
-    r, z = profile_point(lathe.profile_points, lathe.profile_index, lathe.surface.kind,
+    r, z = profile_point(lathe.profile_points, lathe.profile_index, kind_of(lathe.surface).kernel,
                          mi.UInt32(seg.astype(np.uint32)), mi.Float(u.astype(np.float32)))
     phi = mi.Float(phi.astype(np.float32))
     local = mi.Point3f(r * dr.cos(phi), r * dr.sin(phi), z)
