@@ -195,7 +195,7 @@ def prefilter_guides(albedo: np.ndarray, normal: np.ndarray | None) -> tuple[np.
     different surfaces. Given noisy guides, the denoiser keeps part of the
     colour noise as if it were detail; prefiltered guides lower the error of
     denoised glass pixels, the guide-only filters more than OIDN's colour
-    filter run on a guide (README, Turntables)."""
+    filter run on a guide (docs/turntables.md)."""
     # OIDN's "balanced" quality: as close as "high" on the glass, faster.
     albedo = oidn_filter({"albedo": np.clip(albedo, 0.0, 1.0)}, quality=GUIDE_QUALITY)
     if normal is not None:
