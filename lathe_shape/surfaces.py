@@ -68,8 +68,9 @@ from .profiles.sor import SorProfile, make_sor_profile
 from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
-__all__ = ["Surface", "PolylineSurface", "BSplineSurface", "SorSurface", "Kind", "KINDS", "SURFACE_KINDS",
-           "cli_kind_names", "get_kind", "kind_of", "make_surface", "register_kind", "unregister_kind"]
+__all__ = ["Surface", "CurveSurface", "PolylineSurface", "BSplineSurface", "SorSurface", "Kind", "KINDS",
+           "SURFACE_KINDS", "cli_kind_names", "get_kind", "kind_of", "make_surface", "register_kind",
+           "unregister_kind"]
 
 
 class Surface(Protocol):
@@ -122,6 +123,15 @@ class Surface(Protocol):
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         """Normals, uv and partials at a hit ``(seg, u)`` at local point ``p``."""
+
+
+class CurveSurface(Surface, Protocol):
+    """What the curve kinds (every kind but ``polyline``) supply besides."""
+
+    @property
+    def profile_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Adaptive (r, z) samples of the curve, exact unit normals there,
+        and the kernel's texture v (the reference mesh's rings)."""
 
 
 class _KernelSurface:
