@@ -17,9 +17,10 @@ walk (``walk``: ``next_crossing_*``, which the path tracer calls).
 
 Each kernel is compiled first, then all are timed in turn (``dr.eval`` +
 ``dr.sync_thread``), ``--repeat`` rounds; the table gives the median and
-the min-max. ``--module PATH`` loads another version of
-``lathe_shape/kernels/bspline.py``; ``--baseline PATH`` times a second one
-interleaved with it (before/after in one run). ``--threads 1`` times CPU
+the min-max. ``--module PATH`` loads another version of the kernel (a copy
+of the folder ``lathe_shape/kernels``, or its ``bspline.py``: see
+:func:`load_kernel`); ``--baseline PATH`` times a second one interleaved
+with it (before/after in one run). ``--threads 1`` times CPU
 time on one Dr.Jit thread: on a shared machine far steadier than wall time.
 
     python scripts/bench_bspline_kernel.py [--rays 1000000] [--repeat 5] [--threads 1]
@@ -30,7 +31,11 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib
+import importlib.machinery
 import importlib.util
+import os
+import sys
 import time
 
 import drjit as dr
@@ -45,12 +50,26 @@ from lathe_shape.validation.reference import SPLINE_GLASS
 
 
 def load_kernel(path: str | None, name: str = "_bench_alt"):
-    """The B-spline kernel module: the package's, or the file ``path``
-    (loaded as ``lathe_shape.kernels.<name>``, so its relative imports
-    resolve)."""
+    """The B-spline kernel module: the package's, or another version at
+    ``path``. The kernel is ``bspline.py`` with its sibling modules
+    (``bspline_data.py``, ``bspline_roots.py``, ``bspline_traversal.py``,
+    ``common.py``, ``trees.py``): ``path`` is a copy of the folder
+    ``lathe_shape/kernels`` (e.g. ``git archive REV lathe_shape/kernels | tar
+    -x -C DIR``, then ``DIR/lathe_shape/kernels``) or its ``bspline.py``,
+    loaded with all its siblings as the package ``lathe_shape.<name>``. A
+    single-file kernel of older versions (no ``bspline_data.py`` beside it)
+    is loaded alone as ``lathe_shape.kernels.<name>``, so its relative
+    imports resolve to the package's own modules."""
     if path is None:
         from lathe_shape.kernels import bspline
         return bspline
+    folder = path if os.path.isdir(path) else os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path) or os.path.exists(os.path.join(folder, "bspline_data.py")):
+        package = f"lathe_shape.{name}"
+        spec = importlib.machinery.ModuleSpec(package, None, is_package=True)
+        spec.submodule_search_locations = [os.path.abspath(folder)]
+        sys.modules[package] = importlib.util.module_from_spec(spec)
+        return importlib.import_module(f"{package}.bspline")
     spec = importlib.util.spec_from_file_location(f"lathe_shape.kernels.{name}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -157,9 +176,10 @@ def main() -> None:
     parser.add_argument("--rays", type=int, default=1_000_000)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--module", default=None, help="alternative bspline kernel file")
+    parser.add_argument("--module", default=None,
+                        help="alternative kernel: a copy of lathe_shape/kernels, or its bspline.py")
     parser.add_argument("--baseline", default=None,
-                        help="a second bspline kernel file, timed interleaved with the first")
+                        help="a second kernel (as --module), timed interleaved with the first")
     parser.add_argument("--threads", type=int, default=0,
                         help="Dr.Jit worker threads (0: default); with 1, times are CPU times")
     parser.add_argument("--sets", default="camera,surface,inside")

@@ -130,29 +130,77 @@ origin (with a unit direction, so ``s`` is a length) and ``s`` is shifted
 back at the end. All data and rays are in the unit frame of
 kernels/common.py (the profile divided by its size), so the pads and
 thresholds below are relative to the profile whatever the user's units.
+
+Modules: :mod:`.bspline_data` (the data and its numpy build),
+:mod:`.bspline_roots` (the root finding's polynomial helpers and searches),
+:mod:`.bspline_traversal` (ray set-up, box entry, hull culling); here the
+per-leaf solve, the traversal loop, the polish, the public kernels and the
+geometry. Every name of those modules is importable from here.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
-from ..profiles.bspline import power_coefficients
 from . import common
+from .bspline_data import (  # noqa: F401 (importable from here)
+    _KEYS_PER_LEAF,
+    _LEAF_STRIDE,
+    _LEAF_T,
+    _PAIR_WIDTH,
+    _POLISH_REACH,
+    _R0_REL_TOL,
+    _STEPS_CRIT,
+    _STEPS_POLISH,
+    _STEPS_ROOT,
+    _STRIDE,
+    _T_FINAL,
+    _T_PAD,
+    _T_RESOLUTION,
+    _TANGENT_ULPS,
+    LEAF_STRIDE,
+    STRIDE,
+    BSplineData,
+    BSplineGeometry,
+    BSplineHit,
+    _bezier,
+    _cubic_range,
+    _curve_hull,
+    _leaf_pieces,
+    _reparam,
+    _shared_joints,
+    build_bspline_data,
+    build_cubic_data,
+)
+from .bspline_roots import (  # noqa: F401 (importable from here)
+    _bracket_root,
+    _bracket_roots,
+    _by_form,
+    _isolate_critical,
+    _newton_step,
+    _polyder,
+    _polymul,
+    _polyval,
+    _polyval_d,
+    _squared,
+)
+from .bspline_traversal import (  # noqa: F401 (importable from here)
+    _bezier_elevate,
+    _bezier_square,
+    _bezier_to_power,
+    _box_enter,
+    _hull,
+    _into_box,
+    _kept_in_box,
+    _one_sign,
+    _Ray,
+    _visit,
+)
 from .common import (
-    LatheData,
-    LatheGeometry,
-    LatheHit,
-    LatheRay,
-    box_rmin2,
-    opaque,
-    threaded_bvh,
     to_unit_frame,
-    unit_frame,
 )
 
 __all__ = [
@@ -169,602 +217,6 @@ __all__ = [
     "STRIDE",
     "LEAF_STRIDE",
 ]
-
-#: Floats per segment in ``BSplineData.seg``: R0..R3, Z0..Z3 (ascending
-#: powers of t).
-STRIDE = 8
-
-#: Floats per leaf in ``BSplineData.leaf`` (three Vector4f): Bezier control
-#: values R_b0..3 and Z_b0..3 (in the leaf's parameter u; the kernel derives
-#: the power form from them, :func:`_bezier_to_power`), then (t0, h,
-#: segment, r_squared): the last is 1 where the R slots hold R^2 (the sor
-#: kind; the kernel reads the flag from ``BSplineData``, see :func:`_squared`).
-LEAF_STRIDE = 12
-
-# (the former private names, for older importers)
-_STRIDE = STRIDE
-_LEAF_STRIDE = LEAF_STRIDE
-
-#: Longest leaf, in segment parameter t (before padding).
-_LEAF_T = 0.25
-
-#: How far, in segment parameter t, the polish may move a hit past the
-#: segment's ends.
-_T_PAD = 1e-3
-
-#: Newton/bisection steps for critical points and for the roots of F.
-_STEPS_CRIT = 10
-_STEPS_ROOT = 12
-
-#: Relative tolerance of the R(t) >= r0 test of a root (grazing rays).
-_R0_REL_TOL = 1e-5
-
-#: Steps below this (about the float32 spacing near u = 1) end a root search.
-_T_RESOLUTION = 1e-7
-
-#: A Newton step below this ends a root search after it is taken.
-_T_FINAL = 1e-4
-
-#: Newton steps polishing the nearest hit on the (s, t) system.
-_STEPS_POLISH = 2
-
-#: Farthest the polish moves a root's s (unit frame): measured on 10^6 hits
-#: of five profiles, 99.99% move less than 2e-4 and all but a tangent's
-#: less than 2.2e-3. A walk visits the boxes that far before its last
-#: crossing (next_crossing_bspline), as a crossing is ordered by its
-#: polished s but found in the box of its root.
-_POLISH_REACH = 4e-3
-
-#: Tangent-root threshold, in units of float32 epsilon times a bound on the
-#: magnitude of the terms of F (its evaluation error is below that).
-_TANGENT_ULPS = 8.0
-
-#: Width of an unresolved root pair in z, in units of sqrt(tol / a).
-_PAIR_WIDTH = 4.0
-
-#: Crossing keys per leaf (next_crossing_bspline): two per monotonic
-#: interval of F, at most six intervals.
-_KEYS_PER_LEAF = 16
-
-
-class BSplineData(LatheData):
-    """Packed, opaque buffers of one B-spline lathe (local frame).
-
-    Attributes (besides those of :class:`~lathe_shape.kernels.common.LatheData`):
-        seg: ``mi.Float`` of ``n_seg * 8`` values (see ``STRIDE``).
-        leaf: ``mi.Float`` of ``n_leaf * 12`` values (see ``LEAF_STRIDE``).
-        nodes: ``mi.Float``, 4 values per node of the four threaded BVH
-            copies: the annular box ``(rmax, rmin^2, zmin, zmax)``.
-        links: ``mi.UInt32`` per node: an inner node's miss link, or
-            ``LEAF | leaf index``.
-        n_nodes: opaque ``mi.UInt32``: nodes per copy.
-        n_seg: opaque ``mi.UInt32`` (one element): number of segments.
-        n_seg_host, n_leaf_host: the segment and leaf counts as Python ints.
-        r_squared: Python bool, True when the ``R`` slots hold ``R^2`` (the
-            ``sor`` kind, :func:`build_cubic_data`); chosen when tracing.
-        r_squared_flag: the same as an opaque ``mi.UInt32`` (0 or 1): a view
-            of several profiles' data (kernels/top_level.py) gathers it per
-            lane, so that one kernel serves profiles of both forms.
-        bound_r, bound_z_lo, bound_z_hi: opaque ``mi.Float`` padded bounding
-            cylinder of the whole curve (the union of the leaf boxes).
-        scale, inv_scale, z_shift: the unit frame (kernels/common.py), in
-            which ``seg``, ``leaf``, ``nodes`` and the cylinder are given.
-    """
-
-
-#: Result types (shared with the polyline kernel).
-BSplineHit = LatheHit
-BSplineGeometry = LatheGeometry
-
-
-# ---------------------------------------------------------------------------
-# Data
-# ---------------------------------------------------------------------------
-
-def _cubic_range(c: np.ndarray, lo: float, hi: float) -> tuple[float, float]:
-    """Exact (min, max) of the cubic ``c`` (ascending) on [lo, hi]."""
-    ts = [lo, hi]
-    if np.any(c[1:] != 0):
-        for root in np.roots([3 * c[3], 2 * c[2], c[1]]):
-            if abs(root.imag) < 1e-12 and lo < root.real < hi:
-                ts.append(float(root.real))
-    v = np.polynomial.polynomial.polyval(np.array(ts), c)
-    return float(v.min()), float(v.max())
-
-
-def _leaf_pieces(coef: np.ndarray) -> list[tuple[float, float]]:
-    """Pieces [ta, tb] of one segment: cut at the interior extrema of R and
-    Z (monotone pieces have corner-tight boxes), then evenly into pieces of
-    at most ``_LEAF_T``."""
-    cuts = {0.0, 1.0}
-    for c in coef:
-        if np.any(c[1:] != 0):
-            for root in np.roots([3 * c[3], 2 * c[2], c[1]]):
-                if abs(root.imag) < 1e-12 and 0.02 < root.real < 0.98:
-                    cuts.add(float(root.real))
-    cuts = sorted(cuts)
-    pieces = []
-    for ta, tb in zip(cuts[:-1], cuts[1:], strict=True):
-        n = max(1, math.ceil((tb - ta) / _LEAF_T - 1e-9))
-        edges = np.linspace(ta, tb, n + 1)
-        pieces += list(zip(edges[:-1], edges[1:], strict=True))
-    return pieces
-
-
-def _reparam(c: np.ndarray, t0: float, h: float) -> np.ndarray:
-    """Power coefficients in u of the cubic ``c`` at ``t = t0 + h u``."""
-    p = np.polynomial.Polynomial(c)(np.polynomial.Polynomial([t0, h])).coef
-    return np.pad(p, (0, 4 - len(p)))
-
-
-def _bezier(p: np.ndarray) -> np.ndarray:
-    """Bernstein (Bezier) coefficients on [0, 1] of the power-form cubic ``p``."""
-    return np.array([p[0], p[0] + p[1] / 3, p[0] + (2 * p[1] + p[2]) / 3, p.sum()])
-
-
-def _shared_joints(coef: np.ndarray, pieces: list) -> list:
-    """Per leaf ``(i, ta, tb)`` of ``pieces`` (in profile order), its start and
-    end point ``((R, Z), (R, Z))`` as float32 values (``R^2`` for the sor
-    kind), one value per joint: where a leaf ends where the next one (or, for
-    a closed curve, the first one) starts (within float64 rounding of the
-    segment cubics), both get the same point."""
-    P = np.polynomial.polynomial
-    ends = [[P.polyval(t, coef[i].T) for t in (ta, tb)] for i, ta, tb in pieces]
-    n = len(ends)
-    for k in range(n):
-        nxt = (k + 1) % n
-        if np.max(np.abs(ends[k][1] - ends[nxt][0])) <= 1e-9:
-            ends[k][1] = ends[nxt][0]
-    return [[tuple(np.float32(p)) for p in pair] for pair in ends]
-
-
-def build_bspline_data(seg_ctrl: np.ndarray, free_ends: bool = False) -> BSplineData:
-    """Pack validated per-segment control points (from
-    :func:`lathe_shape.profiles.bspline.bspline_segments`, oriented clockwise) into
-    opaque Dr.Jit buffers: segment cubics, leaves with padded boxes, the
-    threaded BVH and the bounding cylinder. Call once per shape.
-    ``free_ends``: see :func:`build_cubic_data`."""
-    seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
-    # The curve lies in the control points' hull: their bounds size the frame
-    return build_cubic_data(power_coefficients(seg_ctrl), seg_ctrl.reshape(-1, 2),
-                            free_ends=free_ends)
-
-
-def _curve_hull(coef: np.ndarray, r_squared: bool) -> np.ndarray:
-    """Two corners ``(rmin, zmin), (rmax, zmax)`` of the exact bounding box
-    of the curve (``coef`` in the user's units)."""
-    r = np.array([_cubic_range(c, 0.0, 1.0) for c in coef[:, 0]])
-    z = np.array([_cubic_range(c, 0.0, 1.0) for c in coef[:, 1]])
-    if r_squared:
-        r = np.sqrt(np.maximum(r, 0.0))
-    return np.array([[r[:, 0].min(), z[:, 0].min()], [r[:, 1].max(), z[:, 1].max()]])
-
-
-def build_cubic_data(coef: np.ndarray, hull: np.ndarray | None = None,
-                     r_squared: bool = False, free_ends: bool = False) -> BSplineData:
-    """Pack the power coefficients ``coef`` (n_seg, 2, 4) of validated
-    clockwise segment cubics ``R(t)``, ``Z(t)`` (any cubic kind, eq. 18) into
-    opaque Dr.Jit buffers, as :func:`build_bspline_data`. ``hull``: points
-    whose bounding box holds the curve (default: its exact box).
-
-    ``r_squared``: ``coef[:, 0]`` holds ``R(t)^2`` itself (the ``sor`` kind,
-    eq. 20), not ``R(t)``: the kernel then uses that cubic where it would
-    square ``R`` (``F`` of eqs. 13-15 drops to degree 3 when ``Z`` is linear),
-    and the segments' ``R`` slots hold ``R^2`` in the unit frame.
-
-    ``free_ends``: the curve is an open sheet (accepted for the callers;
-    leaves are not padded in ``t``, so a free end needs nothing else)."""
-    coef = np.array(coef, dtype=np.float64)
-    pts = _curve_hull(coef, r_squared) if hull is None else np.asarray(hull, dtype=np.float64)
-    size, z_c, frame = unit_frame("build_bspline_data()", float(np.abs(pts[:, 0]).max()),
-                                  float(pts[:, 1].min()), float(pts[:, 1].max()))
-    coef[:, 1, 0] -= z_c
-    coef[:, 1] /= size
-    coef[:, 0] /= size * size if r_squared else size
-    n_seg = len(coef)
-    # Padding (unit frame): float32 rounding of the data and of the ray.
-    pad = 1e-5 * float(np.linalg.norm(np.ptp(pts, axis=0))) / size
-    pieces = [(i, ta, tb) for i in range(n_seg) for ta, tb in _leaf_pieces(coef[i])]
-    ends = _shared_joints(coef, pieces)
-    leaves, boxes = [], []
-    for (i, ta, tb), (start, end) in zip(pieces, ends, strict=True):
-        rp = _reparam(coef[i, 0], ta, tb - ta)
-        zp = _reparam(coef[i, 1], ta, tb - ta)
-        rmin, rmax = _cubic_range(rp, 0.0, 1.0)
-        if r_squared:
-            rmin, rmax = math.sqrt(max(rmin, 0.0)), math.sqrt(max(rmax, 0.0))
-        zmin, zmax = _cubic_range(zp, 0.0, 1.0)
-        rb, zb = _bezier(rp), _bezier(zp)
-        # The end control points are the leaf's joints, shared bit for bit
-        # with the neighbouring leaf (the parity rule of _take_interval)
-        (rb[0], zb[0]), (rb[3], zb[3]) = start, end
-        leaves.append(np.concatenate([rb, zb, [ta, tb - ta, i, float(r_squared)]]))
-        boxes.append([max(min(rmin, rb[0], rb[3]) - pad, 0.0), max(rmax, rb[0], rb[3]) + pad,
-                      min(zmin, zb[0], zb[3]) - pad, max(zmax, zb[0], zb[3]) + pad])
-    boxes = np.array(boxes)
-    # Inner nodes and leaves alike store (rmax, rmin^2, zmin, zmax).
-    def record(b):
-        return [b[1], box_rmin2(b[0]), b[2], b[3]]
-
-    recs, links, n_nodes = threaded_bvh(boxes, record, lambda k, b: record(b))
-
-    return BSplineData(
-        seg=opaque(coef.reshape(n_seg, STRIDE).ravel()),
-        leaf=opaque(np.asarray(leaves).ravel()),
-        nodes=opaque(np.asarray(recs).ravel()),
-        links=opaque(np.asarray(links, dtype=np.uint32), mi.UInt32),
-        n_nodes=opaque(n_nodes, mi.UInt32),
-        n_seg=opaque(n_seg, mi.UInt32),
-        n_seg_host=n_seg,
-        n_leaf_host=len(leaves),
-        r_squared=r_squared,
-        r_squared_flag=opaque(int(r_squared), mi.UInt32),
-        bound_r=opaque(float(boxes[:, 1].max())),
-        bound_z_lo=opaque(float(boxes[:, 2].min())),
-        bound_z_hi=opaque(float(boxes[:, 3].max())),
-        **frame,
-    )
-
-
-# ---------------------------------------------------------------------------
-# Polynomial helpers (unrolled per degree, vectorized over lanes)
-# ---------------------------------------------------------------------------
-
-def _squared(data: LatheData):
-    """Whether the ``R`` slots of ``data`` hold ``R^2`` (the sor kind, eq.
-    20): the Python bool of one lathe's own :class:`BSplineData`, so that
-    its kernel is specialised to one form; else (a view of several profiles'
-    data, kernels/top_level.py, which has no such bool) a per-lane mask
-    from the profile's ``r_squared_flag``."""
-    flag = getattr(data, "r_squared", None)
-    return flag if isinstance(flag, bool) else data.r_squared_flag != 0
-
-
-def _by_form(squared, of_square: Callable, of_radius: Callable, *args):
-    """``of_square(*args)`` where ``squared`` (see :func:`_squared`), else
-    ``of_radius(*args)``: only the one needed for a Python bool, both
-    selected per lane for a mask. The callables return a value or a
-    tuple/list."""
-    if isinstance(squared, bool):
-        return of_square(*args) if squared else of_radius(*args)
-    a, b = of_square(*args), of_radius(*args)
-    if isinstance(a, (list, tuple)):
-        return type(a)(dr.select(squared, x, y) for x, y in zip(a, b, strict=True))
-    return dr.select(squared, a, b)
-
-
-def _polyval(c: list, x):
-    """Horner evaluation of ascending coefficients ``c`` at ``x``."""
-    v = c[-1]
-    for ck in reversed(c[:-1]):
-        v = dr.fma(v, x, ck)
-    return v
-
-
-def _polyval_d(c: list, x):
-    """Value and first derivative of ascending coefficients ``c`` at ``x``."""
-    v, dv = c[-1], mi.Float(0)
-    for ck in reversed(c[:-1]):
-        dv = dr.fma(dv, x, v)
-        v = dr.fma(v, x, ck)
-    return v, dv
-
-
-def _polyder(c: list) -> list:
-    return [c[k] * float(k) for k in range(1, len(c))]
-
-
-def _polymul(p: list, q: list) -> list:
-    out = [None] * (len(p) + len(q) - 1)
-    for i, pi in enumerate(p):
-        for j, qj in enumerate(q):
-            out[i + j] = pi * qj if out[i + j] is None else dr.fma(pi, qj, out[i + j])
-    return out
-
-
-def _bracket_root(c: list, dc: list, x0, x1, f0, f1, steps: int):
-    """Root of the polynomial ``c`` (derivative ``dc``) on [x0, x1], where it
-    is monotonic; ``f0``, ``f1`` are its values at the ends.
-
-    Returns ``(x, found)``. ``found``: ``f0`` and ``f1`` differ in sign (or
-    one is 0), so exactly one root lies in the bracket. It is refined by
-    safeguarded Newton steps (as ``rtsafe`` in Numerical Recipes), starting
-    from the false-position point: a step that would leave the bracket, or
-    that did not halve the previous one, is replaced by bisection, so the
-    bracket shrinks at least geometrically; the result is the evaluated
-    point with the least ``|f|`` (always inside the bracket). A symbolic
-    loop of at most ``steps`` iterations ends when every lane of a packet
-    has converged (usually after 2-4 steps on a leaf). Without a sign change
-    ``x`` is ``x1`` (this keeps the list of critical points sorted for the
-    next level).
-    """
-    return _bracket_roots(c, dc, [(x0, x1, f0, f1, None)], steps)[0]
-
-
-def _bracket_roots(c: list, dc: list, brackets: list, steps: int, strict: bool = False) -> list:
-    """:func:`_bracket_root` on several brackets ``(x0, x1, f0, f1, mask)``
-    of one polynomial at once (``mask``: lanes that search it, ``None``:
-    all), in one symbolic loop: every bracket takes the same steps as on its
-    own (a converged bracket's point stays put), so the results are the
-    same, and a kernel holds one loop instead of one per bracket (fewer
-    loops make faster LLVM code, even where they seldom run).
-
-    ``strict``: a root is found exactly where ``f0 < 0`` and ``f1 < 0``
-    differ (0 counts as positive), so that along a chain of brackets the
-    found roots change the sign as often as the ends do (the parity rule of
-    :func:`_take_interval`); else also where ``f0`` or ``f1`` is 0."""
-    state, starts = [], []
-    for x0, x1, f0, f1, mask in brackets:
-        if strict:
-            found = (f0 < 0) != (f1 < 0)
-        else:
-            found = ((f0 <= 0) & (f1 >= 0)) | ((f0 >= 0) & (f1 <= 0))
-        if mask is not None:
-            found &= mask
-        a, b = mi.Float(x0), mi.Float(x1)  # bracket [a, b]; f(a) has the sign of f0
-        x = dr.clip(x0 - f0 * (x1 - x0) / (f1 - f0), a, b)  # current estimate
-        x = dr.select(dr.isfinite(x), x, 0.5 * (a + b))
-        # (a, b, x, step before last, last step, converged or nothing to
-        # find, evaluated point with the least |f|, its |f|)
-        state.append((a, b, x, b - a, b - a, ~found, mi.Float(x), mi.Float(dr.inf)))
-        starts.append((found, f0 < 0))
-
-    def pending(k, state):
-        todo = ~state[0][5]
-        for bracket in state[1:]:
-            todo |= ~bracket[5]
-        return todo & (k < steps)
-
-    def step(k, state):
-        return k + 1, [_newton_step(c, dc, bracket, neg0)
-                       for bracket, (_, neg0) in zip(state, starts, strict=True)]
-
-    _, state = dr.while_loop((mi.UInt32(0), state), pending, step)
-    out = []
-    for (x0, x1, f0, f1, _), (found, _), bracket in zip(brackets, starts, state, strict=True):
-        x = dr.select(f0 == 0, x0, dr.select(f1 == 0, x1, bracket[6]))
-        out.append((dr.select(found, x, x1), found))
-    return out
-
-
-def _newton_step(c: list, dc: list, bracket: tuple, neg0) -> tuple:
-    """One safeguarded Newton step of :func:`_bracket_roots` on one bracket
-    state (the order of its fields is documented there)."""
-    a, b, x, dx_old, dx, done, best_x, best_f = bracket
-    f, df = _polyval_d(c, x)
-    # Near the root f is float32 noise, and the steps below may then
-    # bisect away from it; the least |f| seen is the answer.
-    better = dr.abs(f) < best_f
-    best_x = dr.select(better, x, best_x)
-    best_f = dr.select(better, dr.abs(f), best_f)
-    left = (f < 0) == neg0
-    a = dr.select(left, x, a)
-    b = dr.select(left, b, x)
-    # Converged: an exact zero, or a Newton step below float32 resolution of
-    # t (checked first: the test below would then pick bisection and jump
-    # away from the root).
-    done = done | (f == 0) | (dr.abs(f) <= _T_RESOLUTION * dr.abs(df))
-    # Newton unless it leaves [a, b] or converges slower than bisection.
-    xn = x - f / df
-    newton = (df != 0) & (xn >= a) & (xn <= b) & (dr.abs(2.0 * f) <= dr.abs(dx_old * df))
-    x_new = dr.select(newton, xn, 0.5 * (a + b))
-    # A Newton step below _T_FINAL is the last one: the next would be of
-    # its square's order, below float32 resolution (saves an evaluation).
-    last = ~done & newton & (dr.abs(f) <= _T_FINAL * dr.abs(df))
-    best_x = dr.select(last, xn, best_x)
-    return a, b, dr.select(done, x, x_new), dx, x_new - x, done | last, best_x, best_f
-
-
-def _isolate_critical(derivs: list, lo, hi) -> list:
-    """Sorted critical points of ``derivs[0]`` (degree k) on [lo, hi]: the
-    roots of its derivative, found level by level from the linear
-    ``derivs[-1]`` up. ``derivs[j]`` is the j-th derivative of ``derivs[0]``.
-    Missing points are filled with interval ends (harmless: they only split a
-    monotonic interval). Returns k - 1 values.
-
-    One symbolic loop runs the levels: each level's polynomial is padded
-    with zero coefficients to the degree of the last (which changes no
-    value), its brackets likewise with empty ones at ``hi``, so that one
-    search of k - 1 brackets serves all levels: a much shorter kernel than
-    a search per level (this runs seldom, but its code slows the rest)."""
-    # The root of the linear derivs[-1] is the critical point of derivs[-2].
-    lin = derivs[-1]
-    x = dr.select(lin[1] != 0, -lin[0] / lin[1], hi)
-    x = dr.select(dr.isfinite(x), x, hi)
-    width = len(derivs[1])  # coefficients of the last level's polynomial
-
-    def padded(c: list) -> list:
-        return list(c) + [mi.Float(0.0)] * (width - len(c))
-
-    levels = {j: (padded(derivs[j]), padded(derivs[j + 1])) for j in range(1, len(derivs) - 1)}
-
-    def level_poly(j):
-        """The polynomial of level ``j`` and its derivative (padded)."""
-        c, dc = levels[len(derivs) - 2]
-        for level in range(len(derivs) - 3, 0, -1):
-            c = [dr.select(j == level, p, q) for p, q in zip(levels[level][0], c, strict=True)]
-            dc = [dr.select(j == level, p, q) for p, q in zip(levels[level][1], dc, strict=True)]
-        return c, dc
-
-    def step(j, crit):
-        # Level j turns its critical points into its roots, the critical
-        # points of level j - 1.
-        c, dc = level_poly(j)
-        xs = [lo] + crit[:width - 2] + [hi]
-        fs = [_polyval(c, xk) for xk in xs]
-        brackets = [(xs[k], xs[k + 1], fs[k], fs[k + 1], None) for k in range(len(xs) - 1)]
-        return j - 1, [r for r, _ in _bracket_roots(c, dc, brackets, _STEPS_CRIT)]
-
-    crit = [dr.clip(x, lo, hi)] + [mi.Float(hi) for _ in range(width - 2)]
-    _, crit = dr.while_loop((mi.UInt32(len(derivs) - 2), crit), lambda j, crit: j > 0, step)
-    return crit
-
-
-# ---------------------------------------------------------------------------
-# Ray setup and culling
-# ---------------------------------------------------------------------------
-
-class _Ray(LatheRay):
-    """The common ray set-up (kernels/common.py) for a unit direction, so that
-    ``s`` is a length, plus the ray's closest approach to the axis."""
-
-    def __init__(self, data: BSplineData, o, d, tmax, active, mode: str = "nearest"):
-        super().__init__(data, o, d, tmax, active)
-        self.mode = mode  # how crossings are taken (_offer)
-        self.after = None  # keyed: the crossing (s, key) to find the next one after
-        self.s_positive = self.s_lo  # hits need s > this (t > 0), whatever s_lo a walk sets
-        self.t_after = None  # ... or, after another lathe's crossing, its t
-        self.data = data  # (keyed: _offer polishes each crossing)
-        self.slack = 0.0  # keyed: how far past the best boxes are visited
-        a, b, c = self.a, self.b, self.c      # a = d_xy.d_xy, b = o_xy.d_xy, c = o_xy.o_xy
-        horiz = a > 1e-12
-        # Closest approach to the axis (xy): s*, at distance sqrt(r0sq)
-        self.s_star = dr.select(horiz, -b / a, 0.0)
-        self.r0sq = dr.select(horiz, self.cross * self.cross / a, c)
-        self.zc = dr.fma(self.d.z, self.s_star, self.o.z)  # z* = z at the closest approach
-        self.inv_a = dr.rcp(dr.maximum(a, 1e-30))
-
-    def reaches(self, lo, hi, r2):
-        """Whether ``r(s)^2 = a (s - s*)^2 + r0^2`` reaches ``r2`` on ``[lo,
-        hi]``: its largest value there is at the end farther from ``s*``."""
-        e0 = lo - self.s_star
-        e1 = hi - self.s_star
-        return dr.fma(self.a, dr.maximum(e0 * e0, e1 * e1), self.r0sq) >= r2
-
-
-def _box_enter(ray: _Ray, box, best, active):
-    """Whether the ray meets the annular box ``(rmax, rmin^2, zmin, zmax)``
-    within (s_lo, best): on the part [lo, hi] of that interval within the
-    box's z slab, ``r(s)^2`` (continuous and convex) takes every value
-    between its least, at ``s*`` clipped to [lo, hi], and its largest, at an
-    end; the box is met iff the first is at most ``rmax^2`` and the second at
-    least ``rmin^2`` (no square root, unlike the interval where ``r <=
-    rmax``)."""
-    zl = (box.z - ray.o.z) * ray.inv_dz
-    zh = (box.w - ray.o.z) * ray.inv_dz
-    lo = dr.maximum(dr.minimum(zl, zh), ray.s_lo)
-    hi = dr.minimum(dr.maximum(zl, zh), best)
-    e = dr.clip(ray.s_star, lo, hi) - ray.s_star
-    inner = dr.fma(ray.a, e * e, ray.r0sq) <= box.x * box.x
-    return active & (lo <= hi) & inner & ray.reaches(lo, hi, box.y)
-
-
-def _into_box(ray: _Ray, box, s):
-    """``s`` moved (where needed) to the nearest point at which the ray is
-    within the annular box ``(rmax, rmin^2, zmin, zmax)`` as
-    :func:`_box_enter` computes it: in the box's z slab, with ``r(s)^2 =
-    a (s - s*)^2 + r0^2`` between ``rmin^2`` and ``rmax^2`` (a few ulps
-    inside), on either side of ``s*``. :func:`_box_enter` is monotonic in
-    the box and in its interval of ``s``, so a leaf's crossing moved into
-    its box is never culled, by its own box or by an inner node's, while it
-    lies between the walk's last crossing and the best one so far (the
-    keyed walk, :func:`_offer`). Only a crossing that the root finder
-    places outside its leaf's box (an ill-conditioned root) moves."""
-    zl = (box.z - ray.o.z) * ray.inv_dz
-    zh = (box.w - ray.o.z) * ray.inv_dz
-    lo, hi = dr.minimum(zl, zh), dr.maximum(zl, zh)
-    ulps = 4.0 * dr.epsilon(mi.Float)
-    # The ray is within [rmin, rmax] where g <= |s - s*| <= g_max
-    g = dr.sqrt(dr.maximum(box.y - ray.r0sq, 0.0) * ray.inv_a) * (1.0 + ulps)
-    g_max = dr.sqrt(dr.maximum(box.x * box.x - ray.r0sq, 0.0) * ray.inv_a) * (1.0 - ulps)
-    far = box.x * box.x < ray.r0sq
-    best_s, best_d = mi.Float(s), mi.Float(dr.inf)
-    for a, b in ((ray.s_star - g_max, ray.s_star - g), (ray.s_star + g, ray.s_star + g_max)):
-        a, b = dr.maximum(a, lo), dr.minimum(b, hi)
-        near = dr.clip(s, a, b)
-        take = (a <= b) & ~far & (dr.abs(near - s) < best_d)
-        best_s = dr.select(take, near, best_s)
-        best_d = dr.select(take, dr.abs(near - s), best_d)
-    return best_s
-
-
-@dr.syntax
-def _kept_in_box(ray: _Ray, box, s):
-    """:func:`_into_box` where ``s`` is not already a point at which
-    :func:`_box_enter` meets the box (the interval ``[s, s]``; every
-    interval of ``s`` holding it meets it then too, as that test is
-    monotonic): a packet whose crossings all lie in their boxes (nearly
-    always) skips it."""
-    zl = (box.z - ray.o.z) * ray.inv_dz
-    zh = (box.w - ray.o.z) * ray.inv_dz
-    e = s - ray.s_star
-    r2 = dr.fma(ray.a, e * e, ray.r0sq)
-    inside = (s >= dr.minimum(zl, zh)) & (s <= dr.maximum(zl, zh)) & (r2 <= box.x * box.x) & (r2 >= box.y)
-    if ~inside:
-        s = _into_box(ray, box, s)
-    return s
-
-
-def _bezier_square(p: list) -> list:
-    """Bernstein coefficients (degree 6) of the square of a Bezier cubic:
-    ``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i p_j``."""
-    return [p[0] * p[0], p[0] * p[1],
-            dr.fma(2.0 * p[0], p[2], 3.0 * p[1] * p[1]) * 0.2,
-            dr.fma(p[0], p[3], 9.0 * p[1] * p[2]) * 0.1,
-            dr.fma(2.0 * p[1], p[3], 3.0 * p[2] * p[2]) * 0.2,
-            p[2] * p[3], p[3] * p[3]]
-
-
-def _bezier_elevate(p: list) -> list:
-    """Bernstein coefficients (degree 6) of a Bezier cubic: its product with
-    the constant 1 (``sum_{i+j=k} C(3,i) C(3,j) / C(6,k) p_i``)."""
-    return [p[0], (p[0] + p[1]) * 0.5, (p[0] + 3.0 * p[1] + p[2]) * 0.2,
-            (p[0] + 9.0 * (p[1] + p[2]) + p[3]) * 0.05, (p[1] + 3.0 * p[2] + p[3]) * 0.2,
-            (p[2] + p[3]) * 0.5, p[3]]
-
-
-def _hull(Rb, Zb, ray: _Ray, squared=False):
-    """Bernstein coefficients of ``F`` (eqs. 13-15, in the form of the module
-    docstring) on a leaf from its Bezier cubics, and ``tol``: a bound on the
-    float32 error of ``F`` and of these coefficients there. ``squared`` (a
-    bool or a mask, :func:`_squared`): ``Rb`` holds ``R^2`` itself (eq. 20),
-    not ``R``."""
-    W = [Zb.x - ray.zc, Zb.y - ray.zc, Zb.z - ray.zc, Zb.w - ray.zc]
-    R = [Rb.x, Rb.y, Rb.z, Rb.w]
-    W2 = _bezier_square(W)
-    R2 = _by_form(squared, lambda: _bezier_elevate(R), lambda: _bezier_square(R))
-    k2 = ray.d.z * ray.d.z
-    G = [dr.fma(ray.a, W2[k], -k2 * (R2[k] - ray.r0sq)) for k in range(7)]
-    # |W(u)| <= max |W_b|, |R(u)| <= max |R_b| (convex hull); the bound on R^2.
-    mw = dr.maximum(dr.maximum(dr.abs(W[0]), dr.abs(W[1])), dr.maximum(dr.abs(W[2]), dr.abs(W[3])))
-
-    def largest(v):
-        return dr.maximum(dr.maximum(v[0], v[1]), dr.maximum(v[2], v[3]))
-
-    mr = _by_form(squared, lambda: largest([dr.abs(x) for x in R]), lambda: largest(R))
-    bound = dr.fma(ray.a, mw * mw, k2 * (_by_form(squared, lambda: mr, lambda: mr * mr) + ray.r0sq))
-    return G, _TANGENT_ULPS * dr.epsilon(mi.Float) * bound
-
-
-def _one_sign(c: list, tol):
-    """Whether all values of ``c`` exceed ``tol`` in magnitude with one sign."""
-    lo, hi = c[0], c[0]
-    for ck in c[1:]:
-        lo = dr.minimum(lo, ck)
-        hi = dr.maximum(hi, ck)
-    return (lo > tol) | (hi < -tol)
-
-
-def _bezier_to_power(b) -> list:
-    """Ascending power coefficients of the Bezier cubic with control values
-    ``b`` (a Vector4f)."""
-    d1, d2, d3 = b.y - b.x, b.z - b.y, b.w - b.z
-    return [b.x, 3.0 * d1, 3.0 * (d2 - d1), (d3 - d2) - (d2 - d1)]
-
-
-def _visit(data: BSplineData, ray: _Ray, node, best, active):
-    """One traversal step: ``(candidate, next node)``. A candidate is a leaf
-    whose box the ray enters before ``best`` (:func:`_solve_leaf` tests its
-    Bernstein hull)."""
-    box = dr.gather(mi.Vector4f, data.nodes, node, active)
-    link, is_leaf, leaf = common.bvh_link(data.links, node, active)
-    enter = _box_enter(ray, box, best, active)
-    cand = enter & is_leaf
-    # Pre-order: descend into an entered inner node, else take its miss
-    # link; stay on a candidate (it is solved next).
-    nxt = dr.select(cand, node, common.bvh_next(node, link, is_leaf, enter))
-    return cand, nxt
-
 
 # ---------------------------------------------------------------------------
 # Per-leaf solve
