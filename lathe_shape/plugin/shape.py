@@ -182,7 +182,7 @@ class LatheShape(mi.Mesh):
 
      * - kind
        - |string|
-       - Profile kind: ``polyline`` (default; the points are the polyline),
+       - Profile kind: ``polyline`` (the points are the polyline),
          ``bspline`` (the points are uniform cubic B-spline control points:
          closed periodic when the last equals the first, otherwise open with
          tripled ends, which must then lie on the axis), or one of POV-Ray's
@@ -192,41 +192,44 @@ class LatheShape(mi.Mesh):
          ``r^2`` a cubic in ``h``, closed by flat discs unless ``open``). A
          profile CSV may name its kind in a ``# kind: NAME`` comment line
          (as ``lathe-profile --from-pov`` writes); the parameter, when given,
-         must agree.
+         must agree. The kinds are those of the registry
+         :data:`lathe_shape.surfaces.KINDS` (:func:`~lathe_shape.surfaces.register_kind`
+         adds one). (Default: ``polyline``)
 
      * - open
        - |bool|
        - The profile is a single open sheet, not the outline of a solid
-         (default: false, or the CSV's ``# open: true``): its ends need not
+         (or the CSV says ``# open: true``): its ends need not
          meet or lie on the axis, and it has no inside. A ``sor`` drops its
          end discs. Use BSDFs that need no inside and work on both sides
          (``thindielectric``, or any BSDF inside a ``twosided``); a
          ``dielectric`` or a one-sided BSDF (``diffuse``, ``conductor`` ...)
-         logs a warning.
+         logs a warning. (Default: false)
 
      * - crease_angle
        - |float|
        - Corners of the profile turning by more than this many degrees keep a
-         sharp edge instead of smoothly interpolated normals (default: 30).
+         sharp edge instead of smoothly interpolated normals. (Default: 30)
 
      * - smooth
        - |bool|
        - Polylines: interpolate shading normals along the profile (the paper's
-         smooth shading, default: true); false renders flat cone frustums.
-         B-splines always use their exact normals.
+         smooth shading); false renders flat cone frustums. B-splines always
+         use their exact normals. (Default: true)
 
      * - mesh_segments
        - |int|
        - Azimuthal steps of the reference tessellation that stock integrators
-         render (default: 256, at least 3). A mesh that would take more than
-         half the available memory is refused, with the estimate.
+         render, at least 3. A mesh that would take more than half the
+         available memory is refused, with the estimate. (Default: 256)
 
      * - reference
        - |string|
-       - ``mesh`` (default): the full reference mesh; ``proxy``: a light,
-         coarse stand-in (12 steps) for scenes of many lathes rendered
-         exactly with ``lathe_path``, which never traces the mesh (stock
-         integrators then render the proxy; keep ``mesh`` for emitting lathes).
+       - ``mesh``: the full reference mesh; ``proxy``: a light, coarse
+         stand-in (12 steps) for scenes of many lathes rendered exactly with
+         ``lathe_path``, which never traces the mesh (stock integrators then
+         render the proxy; keep ``mesh`` for emitting lathes). (Default:
+         ``mesh``)
 
      * - to_world
        - |transform|
