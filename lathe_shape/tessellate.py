@@ -19,7 +19,7 @@ through ``azimuth_steps`` equal angular steps about the local +z axis:
 
 For the profile of a solid the result is watertight once coincident
 positions are welded: every edge is shared by exactly two triangles
-(``tests/test_tessellate.py`` checks this). An open sheet's profile gives an
+(``tests/profiles/test_tessellate.py`` checks this). An open sheet's profile gives an
 open mesh, whose free ends are rings of boundary edges.
 """
 

@@ -1,4 +1,8 @@
-"""Shared fixtures: the Mitsuba variant and random valid profiles."""
+"""Shared fixtures and helpers: the Mitsuba variant, random valid profiles
+and the watertightness check of meshes. The test files lie in folders by
+layer (tests/profiles, kernels, plugin, io, cli, validation); they import
+these helpers with ``from conftest import ...`` (pytest's ``pythonpath``
+puts tests/ on sys.path)."""
 
 from __future__ import annotations
 
@@ -55,3 +59,27 @@ def random_vase_profile(rng: np.random.Generator, n: int) -> np.ndarray:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
+
+
+def welded_edges(mesh):
+    """Edge multiplicities after welding coincident positions."""
+    _, inverse = np.unique(mesh.positions, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[mesh.faces]
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    directed = {tuple(e) for e in edges.tolist()}
+    undirected, counts = np.unique(np.sort(edges, axis=1), axis=0, return_counts=True)
+    return faces, counts, directed, len(edges)
+
+
+def assert_watertight(mesh):
+    faces, counts, directed, n_edges = welded_edges(mesh)
+    # Every edge shared by exactly two faces ...
+    assert counts.min() == 2 and counts.max() == 2
+    # ... traversed once in each direction (consistent orientation).
+    assert len(directed) == n_edges
+    # No degenerate triangles (also none collapsed at the axis).
+    assert (faces[:, 0] != faces[:, 1]).all() and (faces[:, 1] != faces[:, 2]).all()
+    assert (faces[:, 0] != faces[:, 2]).all()
+    v = mesh.positions[mesh.faces]
+    area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    assert area2.min() > 0.0

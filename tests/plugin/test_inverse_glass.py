@@ -1,0 +1,81 @@
+"""Inverse design of a clear hollow glass (both walls) from renders through
+the glass: the projection onto valid hollow profiles, the per-wall error
+measure, and a short recovery that must cut both walls' errors and keep
+the profile valid at every step. The long recovery runs when
+LATHE_INVERSE_TESTS=1."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from lathe_shape.profiles import make_profile
+from lathe_shape.tools.inverse_glass import (
+    HIDDEN_HOLLOW,
+    hollow_cylinder_like,
+    hollow_valid,
+    project_hollow,
+    recover_hollow,
+    wall_rms_errors,
+)
+
+LONG = pytest.mark.skipif(not os.environ.get("LATHE_INVERSE_TESTS"),
+                          reason="long hollow-glass recovery: set LATHE_INVERSE_TESTS=1")
+
+
+def test_start_and_target_are_valid_hollow_profiles():
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    assert len(target) >= 16
+    start = hollow_cylinder_like(target, n_outer)
+    assert start.shape == target.shape
+    for points in (target, start):
+        assert hollow_valid(points, n_outer, 0.02)
+        make_profile(points)
+    assert wall_rms_errors(target, target, n_outer) == pytest.approx((0.0, 0.0), abs=1e-12)
+    outer, inner = wall_rms_errors(start, target, n_outer)
+    assert outer > 0.05 and inner > 0.05
+
+
+def test_projection_keeps_the_walls_apart():
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    start = hollow_cylinder_like(target, n_outer)
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        moved = project_hollow(start + rng.normal(0.0, 0.05, start.shape), n_outer, 0.02, 0.02)
+        assert hollow_valid(moved, n_outer, 0.02)
+        assert moved[0, 0] == 0.0 and moved[-1, 0] == 0.0
+    # A projected valid profile is itself
+    assert np.array_equal(project_hollow(target, n_outer, 0.02, 0.02), target)
+
+
+@pytest.mark.slow
+def test_short_hollow_recovery_cuts_both_errors_and_stays_valid():
+    # 20 steps at 32x32 pixels, 8 spp, three views, inside the smooth
+    # emissive sphere. Measured (seed 0): outer wall 7.84% -> 5.41%, inner
+    # wall 6.46% -> 4.25% of the height, 28 s
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    result = recover_hollow(target, n_outer, iterations=20, resolution=32, spp=8)
+    start_outer, start_inner = result.start_errors
+    outer, inner = result.errors[-1]
+    print(f"hollow glass, short: outer {100 * start_outer:.2f}% -> {100 * outer:.2f}%, "
+          f"inner {100 * start_inner:.2f}% -> {100 * inner:.2f}% of height, {result.seconds:.1f} s")
+    assert all(result.valid) and len(result.valid) == 20
+    make_profile(result.points)
+    assert outer < start_outer / 1.3
+    assert inner < start_inner / 1.3
+
+
+@LONG
+def test_long_hollow_recovery():
+    # 40 steps, three seeds: see /tmp/readme_inverse.md (not the 1% goal)
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    for seed in range(3):
+        result = recover_hollow(target, n_outer, iterations=40, resolution=32, spp=8, seed=seed)
+        outer, inner = result.errors[-1]
+        print(f"hollow glass, long, seed {seed}: outer {100 * outer:.2f}%, inner {100 * inner:.2f}% "
+              f"of height, {result.seconds:.1f} s")
+        assert all(result.valid)
+        assert outer < result.start_errors[0] / 1.4
+        assert inner < result.start_errors[1] / 1.2
