@@ -19,7 +19,7 @@ VARIANT = os.environ.get("LATHE_TEST_VARIANT", "llvm_ad_rgb")
 #: every division is ``div.approx.ftz`` (up to 2 ulp off), subnormals flush
 #: to zero and the PTX assembler may fuse a multiply and an add. Results
 #: that hold bit for bit on LLVM can differ by an ulp on CUDA, and so can
-#: the rare ray decided by that ulp (README, Known limits).
+#: the rare ray decided by that ulp (docs/limits.md).
 CUDA_ROUNDING = pytest.mark.xfail(
     VARIANT.startswith("cuda"), strict=False,
     reason="float32 rounding of Dr.Jit's CUDA backend (approximate division, flush to zero, fused "

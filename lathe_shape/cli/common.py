@@ -11,7 +11,7 @@ renders in worker threads), :mod:`.output` (output folder, staged writes,
 progress bar). Here: rendering a film (:func:`render_image`,
 :func:`render_film`) and running a command (:func:`run_command`).
 
-The convention (the README's "Command line" section):
+The convention (docs/cli.md):
 
 * ``-o/--output DIR`` -- the folder that receives everything a command
   writes, created if missing (``lathe-render``: the current folder;

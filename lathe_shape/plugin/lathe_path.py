@@ -13,7 +13,7 @@ Participating media are not handled.
 
 Why ``fallback`` is the default: in a white furnace (a glass under a uniform
 white sky, where every pixel must be 1; ``scripts/furnace.py``, figures in
-the README) ``terminate`` loses energy along the profile's joints, ``none``
+docs/benchmarks.md) ``terminate`` loses energy along the profile's joints, ``none``
 leaves speckles exactly as stock ``path`` does on the smooth-shaded mesh, and
 ``fallback`` keeps the energy with the fewest speckles. With ``smooth`` false
 nothing can contradict and the policies agree. Under ``terminate`` and

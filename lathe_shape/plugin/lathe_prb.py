@@ -22,7 +22,7 @@ included in that part: the change of *which* surface a ray sees. At the
 lathe's outline as the camera sees it, that change is added by edge
 sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
 26-27); shadow boundaries and outlines seen through other surfaces are
-left out (their share is measured in the README, "Differentiable lathes"),
+left out (their share is measured in docs/differentiable.md),
 as is a delta vertex within 0.2 cosine of grazing (eq. 30). Non-lathe
 shapes are not differentiated with respect to their geometry.
 

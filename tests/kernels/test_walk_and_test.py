@@ -105,6 +105,10 @@ def test_scene_geometry_matches_the_two_queries():
         shadow_on = active & si_ref.is_valid()
         occluded_ref = geometry.ray_test(shadow, shadow_on)
         si, walk, occluded = geometry.walk_and_test(ray, active, walk, False, shadow, shadow_on)
+        # One evaluation of everything compared (each .numpy() below would
+        # otherwise trace and compile its own copy of the traversals: minutes
+        # from an empty kernel cache)
+        dr.eval(si_ref, walk_ref, occluded_ref, si, walk, occluded)
         for mine, theirs in ((si.t, si_ref.t), (si.p, si_ref.p), (si.n, si_ref.n),
                              (si.sh_frame.n, si_ref.sh_frame.n), (si.prim_index, si_ref.prim_index),
                              (walk.lathe, walk_ref.lathe), (walk.s, walk_ref.s), (walk.key, walk_ref.key),

@@ -122,8 +122,8 @@ def test_invisible_lathe_has_zero_gradient():
 #: pixels' coverage to vary smoothly (h = 0.01, 256 spp; the FD's own noise
 #: there is 5-10%). Measured relative errors (seed 3): polyline bowl 3%,
 #: crease 1%, axis 0.5%; B-spline bowl 8%, corner 16%, axis 4%. The
-#: B-spline corner exceeds 10%: the documented bias (README,
-#: "Differentiable lathes").
+#: B-spline corner exceeds 10%: the documented bias
+#: (docs/differentiable.md).
 SILHOUETTE_TOLERANCE = {("polyline", "bowl"): 0.1, ("polyline", "crease"): 0.1, ("polyline", "axis"): 0.1,
                         ("bspline", "bowl"): 0.1, ("bspline", "corner"): 0.2, ("bspline", "axis"): 0.1}
 

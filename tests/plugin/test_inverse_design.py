@@ -70,8 +70,8 @@ def test_recover_bspline_vase():
 @pytest.mark.parametrize("seed", [0, pytest.param(2, marks=MORE_SEEDS)])
 @pytest.mark.slow
 def test_recover_polyline_glass(seed):
-    # Measured over the seeds 0-6: 0.58-0.74% of the height (README,
-    # "Differentiable lathes")
+    # Measured over the seeds 0-6: 0.58-0.74% of the height
+    # (docs/differentiable.md)
     result = recover_profile(HIDDEN_PROFILES["polyline"], "polyline", iterations=60, resolution=32, spp=16,
                              seed=seed)
     print(f"polyline glass, seed {seed}: final profile RMS error {100 * result.errors[-1]:.3f}% of height")
