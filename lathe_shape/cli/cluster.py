@@ -137,8 +137,7 @@ def render_job_on_cluster(job: Job, prog: str) -> int:
     )
     from ..tools.frames import plan_frames
     from ..tools.writer import FrameWriter
-    from .common import format_duration
-    from .turntable import finish_frame, pending_frames
+    from .turntable import finish_frame, pending_frames, print_turn_summary
 
     args = job.args
     frames = plan_frames(args.count, job.indices, job.out_dir, args.seed, same_seed=args.seeds == "same")
@@ -199,11 +198,5 @@ def render_job_on_cluster(job: Job, prog: str) -> int:
         print(interrupted(), file=sys.stderr)
         return 130
     progress.close()
-    elapsed = time.perf_counter() - start
-    print(
-        f"  rendered {progress.rendered} frame(s), skipped {len(frames) - progress.rendered} already done, "
-        f"in {elapsed:.2f} s{'' if elapsed < 60 else ' (' + format_duration(elapsed) + ')'}; "
-        f"output folder {job.out_dir}",
-        flush=True,
-    )
+    print_turn_summary(progress.rendered, len(frames), job.out_dir, start)
     return 0

@@ -440,7 +440,6 @@ def render_job(job: Job) -> int:
     import drjit as dr
 
     from ..tools.frames import plan_frames
-    from .common import format_duration
 
     frames = plan_frames(job.args.count, job.indices, job.out_dir, job.args.seed,
                          same_seed=job.args.seeds == "same")
@@ -469,14 +468,22 @@ def render_job(job: Job) -> int:
         if job.args.threads is not None:
             dr.set_thread_count(threads)
     progress.close()
+    print_turn_summary(progress.rendered, len(frames), job.out_dir, start)
+    return 0
+
+
+def print_turn_summary(rendered: int, planned: int, out_dir: str, start: float) -> None:
+    """The turn's last line: frames rendered and skipped, the time since
+    ``start`` (``time.perf_counter``) and the output folder."""
+    from .common import format_duration
+
     elapsed = time.perf_counter() - start
     print(
-        f"  rendered {progress.rendered} frame(s), skipped {len(frames) - progress.rendered} already done, "
+        f"  rendered {rendered} frame(s), skipped {planned - rendered} already done, "
         f"in {elapsed:.2f} s{'' if elapsed < 60 else ' (' + format_duration(elapsed) + ')'}; "
-        f"output folder {job.out_dir}",
+        f"output folder {out_dir}",
         flush=True,
     )
-    return 0
 
 
 def write_videos(job: Job) -> None:

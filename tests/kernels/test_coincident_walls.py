@@ -150,17 +150,24 @@ def walk_stats(geometry: ExactSceneGeometry, lathes, start: np.ndarray, end: np.
     return out
 
 
-def test_walls_10um_apart_cross_evenly_once_each():
-    """20k lines (a quarter aimed at profile vertices, a quarter grazing
-    them): each lathe's walked crossings are its own count of the line (even,
-    none lost, none taken twice)."""
-    stats = crossing_stats(GAP_10UM, 20000, 24)
+def assert_each_crossing_once(stats: dict[str, dict[str, int]]) -> None:
+    """Every lathe met by most lines, and on every line its walked
+    crossings are its own count: even, none lost, none taken twice, every
+    walk finished within its steps."""
     print(stats)
     for name, s in stats.items():
         assert s["lines"] > 9000, (name, s)
         assert s["own_odd"] == 0 and s["odd"] == 0, (name, s)
         assert s["lost"] == 0 and s["doubled"] == 0, (name, s)
         assert s["unfinished"] == 0, (name, s)
+
+
+def test_walls_10um_apart_cross_evenly_once_each():
+    """20k lines (a quarter aimed at profile vertices, a quarter grazing
+    them): each lathe's walked crossings are its own count of the line (even,
+    none lost, none taken twice)."""
+    stats = crossing_stats(GAP_10UM, 20000, 24)
+    assert_each_crossing_once(stats)
 
 
 def test_coincident_walls_cross_evenly_once_each():
@@ -168,12 +175,7 @@ def test_coincident_walls_cross_evenly_once_each():
     points): the walk orders crossings by t, then lathe (eq. 31), so the
     shared wall's two crossings are each taken once."""
     stats = crossing_stats(0.0, 20000, 24)
-    print(stats)
-    for name, s in stats.items():
-        assert s["lines"] > 9000, (name, s)
-        assert s["own_odd"] == 0 and s["odd"] == 0, (name, s)
-        assert s["lost"] == 0 and s["doubled"] == 0, (name, s)
-        assert s["unfinished"] == 0, (name, s)
+    assert_each_crossing_once(stats)
 
 
 #: A straight-walled cup (polyline) and the liquid in it (a bezier profile:
@@ -199,12 +201,7 @@ def test_coincident_walls_of_two_kinds_cross_evenly_once_each():
     start = np.vstack([p[:-1] for p in points])
     end = np.vstack([p[1:] for p in points])
     stats = walk_stats(geometry, geometry.single, start, end, 20000, 16)
-    print(stats)
-    for name, s in stats.items():
-        assert s["lines"] > 9000, (name, s)
-        assert s["own_odd"] == 0 and s["odd"] == 0, (name, s)
-        assert s["lost"] == 0 and s["doubled"] == 0, (name, s)
-        assert s["unfinished"] == 0, (name, s)
+    assert_each_crossing_once(stats)
 
 
 FURNACE = """<scene version="3.0.0">
