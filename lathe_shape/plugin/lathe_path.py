@@ -27,7 +27,16 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
+from .caustic_paths import (
+    CausticTracer,
+    camera_density,
+    caustic_weight,
+    chain_length_limit,
+    on_lathe,
+    pure_delta,
+)
 from .integrator_base import (
     NORMAL_CHECKS,
     ExactLatheSamplingIntegrator,
@@ -108,6 +117,28 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
          normal, ``nn.X``, ``nn.Y``, ``nn.Z``, world space, turned to face the
          ray), named as Mitsuba's ``aov`` integrator names them. (Default: none)
 
+     * - caustics
+       - |bool|
+       - Also trace caustic paths from the lights: particles sent from area,
+         point and spot lights towards the lathes, through glass (Dirac delta
+         surfaces) onto a diffuse surface seen by the camera, and connected
+         to the camera there; combined with path tracing by multiple
+         importance sampling, so the image stays unbiased and its caustics
+         converge many times faster. Point and spot light caustics, which
+         path tracing cannot find, appear only with it. Needs an RGB variant
+         and a ``perspective`` sensor; ignored (path tracing alone) with
+         ``hide_emitters``. (Default: true)
+
+     * - caustic_paths
+       - |float|
+       - Light particles per camera sample for ``caustics``. (Default: 1)
+
+     * - caustic_max_chain
+       - |int|
+       - Most specular vertices between the light and the diffuse surface
+         on a light-traced caustic path (also bounded by ``max_depth`` - 2);
+         longer chains are path traced alone. (Default: 8)
+
      * - aov_through_delta
        - |bool|
        - Where the guides are taken: ``true`` at the first vertex whose BSDF
@@ -131,6 +162,65 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 f"this is '{mi.variant()}'"
             )
         self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
+        self.caustics = typed_property(props, "caustics", bool, True, who)
+        self.caustic_paths = typed_property(props, "caustic_paths", float, 1.0, who)
+        if not (self.caustic_paths > 0.0 and self.caustic_paths < 1e6):
+            raise ValueError(
+                f"lathe_path: parameter 'caustic_paths' must be > 0 and finite; got {self.caustic_paths}")
+        self.caustic_max_chain = typed_property(props, "caustic_max_chain", int, 8, who)
+        if self.caustic_max_chain < 1:
+            raise ValueError(
+                f"lathe_path: parameter 'caustic_max_chain' must be >= 1; got {self.caustic_max_chain}")
+        #: While a render with caustics runs: (tracer, sensor, particles per
+        #: camera sample as an opaque Float) for the traced sample().
+        self._caustic_render = None
+
+    def caustic_setup(self, scene: mi.Scene, sensor: mi.Sensor) -> tuple[CausticTracer | None, str]:
+        """The caustic tracer of a render of ``scene`` through ``sensor``
+        and ``""`` or, where caustics are off or unsupported, ``None`` and
+        why."""
+        if not self.caustics:
+            return None, "off"
+        if not mi.is_rgb:
+            return None, f"caustics need an RGB variant (this is '{mi.variant()}')"
+        if sensor.class_name() != "PerspectiveCamera":
+            return None, f"caustics need a perspective sensor (this is '{sensor.class_name()}')"
+        if self.hide_emitters:
+            return None, "caustics are not traced with hide_emitters"
+        chain = chain_length_limit(self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30,
+                                   self.caustic_max_chain)
+        geometry = self.geometry(scene)
+        tracer = CausticTracer(scene, geometry.lathes, chain, self.normal_check)
+        return (tracer, "") if tracer.active else (None, "no lathes or no area, point or spot lights")
+
+    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
+               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
+        """Mitsuba's render, plus the light-traced caustic paths
+        (``caustics``; eq. 32), added to the developed image and to the
+        film."""
+        sensor_obj = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+        # (Mitsuba's render by sensor index calls this again with the sensor:
+        # the inner call renders the paths alone)
+        inner = self._caustic_render is not None
+        tracer, _ = self.caustic_setup(scene, sensor_obj) if develop and not inner else (None, "")
+        if tracer is None:
+            return super().render(scene, sensor, seed, spp, develop, evaluate)
+        film = sensor_obj.film()
+        spp = spp or sensor_obj.sampler().sample_count()
+        crop = film.crop_size()
+        count = max(1, round(self.caustic_paths * spp * crop.x * crop.y))
+        per_camera_sample = count / (spp * film.size().x * film.size().y)
+        self._caustic_render = (tracer, sensor_obj, dr.opaque(mi.Float, per_camera_sample))
+        try:
+            image = super().render(scene, sensor, seed, spp, develop, evaluate)
+        finally:
+            self._caustic_render = None
+        caustic = tracer.render(scene, self.geometry(scene), sensor_obj, seed, count,
+                                dr.opaque(mi.Float, per_camera_sample))
+        image = add_to_film(film, image, caustic)
+        if evaluate:
+            dr.eval(image)
+        return image
 
     @dr.syntax
     def sample(
@@ -170,6 +260,12 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         shadow = dr.zeros(mi.Ray3f, dr.width(ray.d))     # Its shadow ray
         em_pending = dr.zeros(mi.Bool, dr.width(ray.d))  # Lanes with one to test
         em_value = mi.Spectrum(0.0)                      # Its contribution if unoccluded
+        # Eq. 32: caustic paths, also traced from the lights (see render)
+        caustics = self._caustic_render
+        tracer, sensor, per_camera_sample = caustics if caustics is not None else (None, None, None)
+        caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
+        caustic_chain = mi.UInt32(0)         # Its specular vertices after D
+        caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
@@ -185,6 +281,14 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
+            if dr.hint(caustics is not None, mode="scalar"):
+                # Eq. 32: a caustic path that the light tracer samples too
+                both = (active & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
+                        & mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Surface))
+                light_density = per_camera_sample * tracer.light_density(
+                    si.shape.pdf_position(ds, both), dr.dot(si.n, ray.d), si.p, -ray.d)
+                weight = caustic_weight(caustic_density, light_density)
+                mis_bsdf = dr.select(both, mis_bsdf * weight, mis_bsdf)
             emitted = ds.emitter.eval(si, active)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
@@ -254,6 +358,18 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             mis_em = dr.select(ds.delta, 1.0, mis_weight(ds.pdf, bsdf_pdf_em))
             em_value = beta * mis_em * bsdf_val_em * em_weight
 
+            if dr.hint(caustics is not None, mode="scalar"):
+                # Eq. 32: D is the camera ray's first hit, smooth and sampled
+                # with a smooth lobe; the chain after it only Dirac deltas
+                first = depth == 0
+                at_d = (first & active_next & ~bad_in & ~pure_delta(bsdf) & ~on_lathe(tracer.lathes, si)
+                        & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0))
+                density_d = (camera_density(sensor, si, -ray.d, at_d) * bs.pdf
+                             / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
+                caustic_density = dr.select(at_d, density_d, caustic_density)
+                caustic_open = dr.select(first, at_d, caustic_open & pure_delta(bsdf))
+                caustic_chain = dr.select(first, 0, caustic_chain + 1)
+
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
             ray = si.spawn_ray(wo_world)
@@ -286,6 +402,25 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             f"hide_emitters={self.hide_emitters}, normal_check='{self.normal_check}', "
             f"aovs='{','.join(self.aovs)}']"
         )
+
+
+def add_to_film(film: mi.Film, image: mi.TensorXf, caustic: mi.TensorXf) -> mi.TensorXf:
+    """``image`` (developed, channels as ``film.bitmap()`` names them) with
+    ``caustic`` (H, W, 3) added to its RGB channels; the film then holds
+    the sum, so that ``film.develop()``, ``film.bitmap()`` and ``film.write()``
+    give it too (its weights become 1)."""
+    total = np.array(image, dtype=np.float32)
+    total[:, :, :3] += np.asarray(caustic, dtype=np.float32)
+    raw = film.bitmap(raw=True)
+    raw_names = [raw.struct_()[index].name for index in range(raw.channel_count())]
+    developed = film.bitmap()
+    names = [developed.struct_()[index].name for index in range(developed.channel_count())]
+    ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
+    storage = np.concatenate([ones if name == "W" else total[:, :, names.index(name)][:, :, None]
+                              for name in raw_names], axis=2)
+    film.prepare(raw_names[raw_names.index("W") + 1:])
+    film.put_block(mi.ImageBlock(mi.TensorXf(storage), film.crop_offset()))
+    return mi.TensorXf(total)
 
 
 def register() -> None:

@@ -1,5 +1,7 @@
 """lathe_path compiles its render kernel once: later renders of the same
-scene, with other seeds, launch the very kernels of the first."""
+scene, with other seeds, launch the very kernels of the first (which may
+also launch one-off kernels of the scene's setup, such as a mesh's area
+table, built the first time the caustic paths' weights ask for it)."""
 
 from __future__ import annotations
 
@@ -25,4 +27,5 @@ def test_second_render_reuses_the_first_kernels():
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 3})
     first = _jit_hashes(scene, integrator, seed=0)
     second = _jit_hashes(scene, integrator, seed=1)
-    assert first and second == first
+    assert first and second and second <= first
+    assert second == _jit_hashes(scene, integrator, seed=2)

@@ -1,0 +1,340 @@
+"""Caustic paths traced from the lights (``lathe_path``'s ``caustics``).
+
+A caustic on a floor is light that reached the floor through glass:
+light -> one or more specular vertices -> a diffuse vertex ``D`` -> camera.
+Path tracing meets such a path only when the BSDF sample at ``D`` happens to
+leave through the glass towards the light, which makes the speckles of a
+low-spp frame. Traced from the light instead, the same path is found every
+time the light's particle goes through the glass: it lands on ``D`` and is
+connected to the camera there (a light tracer's ``t = 1`` connection).
+
+Both techniques sample the same paths, so they are combined by multiple
+importance sampling (the power heuristic) and nothing is counted twice:
+
+* The **caustic class** is every path ``camera -> D -> S_1 ... S_k -> light``
+  with ``D`` the camera ray's first hit, a surface that is neither an exact
+  lathe nor a pure Dirac delta and sampled with its smooth lobes; ``S_1 ...
+  S_k`` (``1 <= k <= max_chain``) surfaces whose BSDF is pure Dirac
+  delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``); and the
+  light an area emitter, a point or a spot light.
+* Every other path is path traced alone, as before.
+* On a caustic path, the two techniques' densities share the chain's
+  generalized geometry term, which cancels in their ratio: eq. 32 of
+  docs/method.md needs only the camera's and the BSDF's densities at
+  ``D`` and the light's at ``L``. Path tracing cannot sample a point or
+  spot light's caustic at all: there the light tracer's weight is 1.
+
+The light tracer aims its particles at the lathes: directions are drawn
+uniformly in the cone from the light point to a sphere around every exact
+lathe (eq. 33), and the same cone density enters the weights, so
+directions outside it belong to path tracing alone. The estimator stays
+unbiased for any cone.
+
+Limits (each falls back to path tracing alone, unbiased): RGB variants,
+a ``perspective`` sensor, not with ``hide_emitters``; environment and
+directional lights send no particles.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .integrator_base import sample_with_fallback, with_geometric_frame
+from .line_walk import start_walk
+
+__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "on_lathe", "pure_delta"]
+
+#: Margin of the aiming spheres over the lathes' tessellated profiles (a
+#: B-spline's curve may bulge past its points between them).
+SPHERE_MARGIN = 1.02
+
+#: Particles traced in one kernel launch at most (memory of a wavefront).
+PASS_SIZE = 1 << 22
+
+#: Most spheres the particles aim at (beyond: one around every lathe).
+MAX_SPHERES = 16
+
+
+def pure_delta(bsdf: mi.BSDFPtr) -> mi.Bool:
+    """Whether ``bsdf`` has Dirac delta lobes only (a chain vertex)."""
+    return ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+
+
+def on_lathe(lathes: list, si: mi.SurfaceInteraction3f) -> mi.Bool:
+    """Whether ``si`` lies on one of the exact ``lathes``."""
+    hit = mi.Bool(False)
+    for lathe in lathes:
+        hit |= si.shape == mi.ShapePtr(lathe)
+    return hit
+
+
+def aim_spheres(lathes: list) -> list[tuple[tuple[float, float, float], float]]:
+    """Spheres (centre, radius) whose union holds every lathe in ``lathes``:
+    each lathe's axis cut into slices about as tall as its widest radius,
+    one sphere around each slice (a bottle 19 tall and 9 wide gets five,
+    whose outline is half the area of one sphere around it). Scenes of
+    more than 16 such spheres get one sphere around all lathes."""
+    spheres = []
+    for lathe in lathes:
+        positions = np.asarray(lathe.local_mesh.positions, dtype=np.float64).reshape(-1, 3)
+        radius = SPHERE_MARGIN * float(np.max(np.hypot(positions[:, 0], positions[:, 1])))
+        z_low, z_high = float(positions[:, 2].min()), float(positions[:, 2].max())
+        height = max(z_high - z_low, 1e-6 * max(radius, 1.0))
+        count = int(min(8, max(1, math.ceil(height / max(radius, 1e-12)))))
+        matrix = np.asarray(lathe.to_world_matrix, dtype=np.float64)
+        scale = float(np.linalg.svd(matrix[:3, :3], compute_uv=False).max())
+        half = 0.5 * height / count
+        for index in range(count):
+            z = z_low + (2 * index + 1) * half
+            centre = matrix @ np.array([0.0, 0.0, z, 1.0])
+            reach = scale * math.hypot(radius, half) * SPHERE_MARGIN
+            spheres.append((tuple(float(c) for c in centre[:3]), reach))
+    if len(spheres) > MAX_SPHERES:
+        low = np.min([np.array(c) - r for c, r in spheres], axis=0)
+        high = np.max([np.array(c) + r for c, r in spheres], axis=0)
+        spheres = [(tuple(float(c) for c in 0.5 * (low + high)), 0.5 * float(np.linalg.norm(high - low)))]
+    return spheres
+
+
+def cone_cosine(centre: mi.Point3f, radius: float, p: mi.Point3f) -> tuple[mi.Vector3f, mi.Float]:
+    """Eq. 33: the axis (unit) and the cosine of the half angle of the cone
+    from ``p`` around the sphere (``centre``, ``radius``); -1 (all
+    directions) from inside the sphere."""
+    axis = centre - p
+    dist2 = dr.squared_norm(axis)
+    sin2 = dr.square(radius) / dr.maximum(dist2, 1e-30)
+    cos_max = dr.select(sin2 < 1.0, dr.safe_sqrt(1.0 - sin2), -1.0)
+    return dr.normalize(axis), cos_max
+
+
+def aim_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
+    """Eq. 33: the solid-angle density of direction ``d`` from ``p`` drawn
+    by :meth:`CausticTracer._trace` (a sphere of ``spheres`` chosen
+    uniformly, then a direction uniformly in the cone around it; 0 outside
+    every cone)."""
+    total = mi.Float(0.0)
+    for centre, radius in spheres:
+        axis, cos_max = cone_cosine(mi.Point3f(centre), radius, p)
+        inside = dr.dot(axis, d) >= cos_max
+        total += dr.select(inside, dr.rcp(dr.two_pi * (1.0 - cos_max)), 0.0)
+    return total / len(spheres)
+
+
+def caustic_weight(own: mi.Float, other: mi.Float) -> mi.Float:
+    """Eq. 32: the power-heuristic weight of the technique with density
+    ``own`` against ``other`` (each already multiplied by its sample count;
+    an infinite ``own`` wins, a zero ``own`` gets nothing)."""
+    own2, other2 = dr.square(own), dr.square(other)
+    return dr.select(dr.isinf(own), 1.0, dr.select(own2 > 0.0, own2 / (own2 + other2), 0.0))
+
+
+def camera_density(sensor: mi.Sensor, si: mi.SurfaceInteraction3f, to_camera: mi.Vector3f,
+                   active: mi.Bool) -> mi.Float:
+    """Eq. 32: the area density at ``si`` of a camera ray through the whole
+    film (the sensor's importance over the squared distance, times the
+    cosine at ``si``), for a pinhole ``perspective`` sensor."""
+    it = mi.Interaction3f(si)
+    _, importance = sensor.sample_direction(it, mi.Point2f(0.5), active)
+    return dr.select(active, importance.x * dr.abs(dr.dot(si.n, to_camera)), 0.0)
+
+
+def chain_length_limit(max_depth: int, max_chain: int) -> int:
+    """The longest specular chain in the caustic class: a path of ``k``
+    chain vertices reaches the light at depth ``k + 1``, which the path
+    tracer counts when ``k + 1 < max_depth``."""
+    return max(0, min(max_chain, max_depth - 2))
+
+
+class CausticTracer:
+    """The light-tracing half of ``lathe_path``'s caustics for one scene:
+    which lights send particles, the sphere they aim at, and the pass that
+    traces them (:meth:`render`). Made by the integrator each render."""
+
+    def __init__(self, scene: mi.Scene, lathes: list, max_chain: int, normal_check: str) -> None:
+        self.lathes = lathes
+        self.max_chain = max_chain
+        self.normal_check = normal_check
+        emitters = scene.emitters()
+        #: Indices (in ``scene.emitters()``) of the lights that send particles.
+        self.light_indices = [
+            index for index, emitter in enumerate(emitters)
+            if mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
+            or (mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition))
+        ]
+        #: The spheres that particles aim at (eq. 33).
+        self.spheres = aim_spheres(lathes)
+        centres = [centre for centre, _ in self.spheres]
+        self.sphere_centres = np.array(centres, dtype=np.float32).reshape(-1, 3)
+        self.sphere_radii = np.array([radius for _, radius in self.spheres], dtype=np.float32)
+
+    @property
+    def active(self) -> bool:
+        """Whether there is anything to trace (lights and lathes)."""
+        return bool(self.light_indices) and bool(self.lathes) and self.max_chain >= 1
+
+    def light_density(self, p_area: mi.Float, cos_light: mi.Float, p: mi.Point3f,
+                      d: mi.Vector3f) -> mi.Float:
+        """Eq. 32, light side: the density of a particle leaving an area
+        light at ``p`` (position density ``p_area``) in direction ``d``,
+        over ``cos_light``, with the light chosen uniformly."""
+        p_cone = aim_pdf(self.spheres, p, d)
+        return p_area * p_cone / (len(self.light_indices) * dr.maximum(dr.abs(cos_light), 1e-12))
+
+    # ------------------------------------------------------------------
+    # The light pass
+    # ------------------------------------------------------------------
+
+    def render(self, scene: mi.Scene, geometry, sensor: mi.Sensor, seed: int, count: int,
+               per_camera_sample: float) -> mi.TensorXf:
+        """Trace ``count`` particles and splat their camera connections
+        through the film's filter: the caustic image to add to the path
+        tracer's developed one (H, W, 3). ``per_camera_sample``: particles
+        per camera sample over the whole film, the ratio of the two
+        techniques' sample counts in eq. 32."""
+        film = sensor.film()
+        block = mi.ImageBlock(film.crop_size(), film.crop_offset(), 3, film.rfilter(),
+                              border=False, normalize=True)
+        pixels = float(film.size().x * film.size().y)
+        passes = max(1, math.ceil(count / PASS_SIZE))
+        done = 0
+        for index in range(passes):
+            size = (count - done) // (passes - index)
+            done += size
+            sampler = mi.load_dict({"type": "independent"})
+            # (opaque: a new seed or count must not compile new kernels)
+            sampler.seed(dr.opaque(mi.UInt32, (seed * 7919 + 104729 * (index + 1)) & 0xFFFFFFFF), size)
+            pos, value, splat = self._trace(scene, geometry, sensor, sampler, size, per_camera_sample)
+            # (a non-finite value would spoil its pixels: none is expected, see
+            # tests/plugin/test_caustics.py, but none reaches the film)
+            splat &= dr.all(dr.isfinite(value))
+            scale = dr.opaque(mi.Float, pixels / count)
+            block.put(pos, [value.x * scale, value.y * scale, value.z * scale], splat)
+            dr.eval(block.tensor())
+        return block.tensor()
+
+    @dr.syntax
+    def _trace(self, scene: mi.Scene, geometry, sensor: mi.Sensor, sampler: mi.Sampler, size: int,
+               per_camera_sample: float) -> tuple[mi.Point2f, mi.Spectrum, mi.Bool]:
+        """One wavefront of ``size`` particles: film positions, values (to
+        be scaled by pixels / particles) and which lanes splat (values
+        not checked for being finite)."""
+        check = self.normal_check
+        ctx = mi.BSDFContext(mi.TransportMode.Importance)
+        lights = len(self.light_indices)
+
+        # ---------------- Eq. 33: a particle aimed at the lathes ----------------
+        pick = dr.minimum(mi.UInt32(sampler.next_1d() * lights), lights - 1)
+        index = dr.gather(mi.UInt32, mi.UInt32(self.light_indices), pick)
+        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), index)
+        ps = emitter.sample_position(0.0, sampler.next_2d())[0]
+        spheres = self.spheres
+        choice = dr.minimum(mi.UInt32(sampler.next_1d() * len(spheres)), len(spheres) - 1)
+        centre = dr.gather(mi.Point3f, mi.Point3f(*self.sphere_centres.T), choice)
+        radius = dr.gather(mi.Float, mi.Float(self.sphere_radii), choice)
+        axis, cos_max = cone_cosine(centre, radius, ps.p)
+        local = mi.warp.square_to_uniform_cone(sampler.next_2d(), cos_max)
+        d = mi.Frame3f(axis).to_world(local)
+        p_cone = aim_pdf(spheres, ps.p, d)
+        is_delta = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
+        # Area light: radiance along d, times cos / (position, direction density)
+        si_light = dr.zeros(mi.SurfaceInteraction3f, size)
+        si_light.p, si_light.n, si_light.uv, si_light.time = ps.p, ps.n, ps.uv, ps.time
+        si_light.sh_frame = mi.Frame3f(ps.n)
+        si_light.wi = si_light.sh_frame.to_local(d)
+        cos_light = dr.dot(ps.n, d)
+        radiance = emitter.eval(si_light, ~is_delta & (cos_light > 0.0))
+        # Point or spot light: its intensity along d, read at unit distance
+        it = dr.zeros(mi.Interaction3f, size)
+        it.p, it.time = ps.p + d, ps.time
+        intensity = emitter.sample_direction(it, mi.Point2f(0.5), is_delta)[1]
+        emitted = radiance * dr.maximum(cos_light, 0.0) / dr.maximum(ps.pdf, 1e-30)
+        beta = dr.select(is_delta, intensity, emitted) * (lights / p_cone)
+        # Eq. 32: the light side's density (infinite for a point light: path
+        # tracing cannot hit it)
+        area_density = per_camera_sample * ps.pdf * p_cone / (lights * dr.maximum(cos_light, 1e-12))
+        light_density = dr.select(is_delta, dr.inf, area_density)
+        origin = dr.zeros(mi.SurfaceInteraction3f, size)
+        origin.p, origin.n, origin.time = ps.p, dr.select(is_delta, 0.0, ps.n), ps.time
+
+        ray = origin.spawn_ray(d)                 # Current ray of the particle
+        walk = start_walk(size)                   # Its line and last lathe crossing
+        chain = mi.UInt32(0)                      # Specular vertices passed so far
+        active = dr.max(beta) > 0.0               # Particles still going through glass
+        landed = dr.zeros(mi.Bool, size)          # Particles that reached a diffuse D
+        si_d = dr.zeros(mi.SurfaceInteraction3f, size)  # ... that D
+        ds = dr.zeros(mi.DirectionSample3f, size)  # ... its direction to the camera
+        importance = mi.Spectrum(0.0)             # ... and the camera's importance there
+        # The camera connection's shadow ray is tested by the next query, in
+        # the same traced lathe traversal as the walked rays (as lathe_path's
+        # emitter samples: one traversal compiled, not two)
+        shadow = dr.zeros(mi.Ray3f, size)         # Connection from D to the camera
+        pending = dr.zeros(mi.Bool, size)         # Lanes with one to test
+        visible = dr.zeros(mi.Bool, size)         # Lanes whose connection is clear
+        # (a lane that landed runs once more to test its connection)
+        while dr.hint(active | pending, max_iterations=-1, label="lathe_path_caustics"):
+            si, walk, occluded = geometry.walk_and_test(ray, active, walk, False, shadow, pending)
+            visible |= pending & ~occluded
+            bsdf = si.bsdf(ray)
+            delta = pure_delta(bsdf)
+            valid = active & si.is_valid()
+            # D: the first smooth surface after at least one specular vertex
+            lands = valid & ~delta & (chain >= 1) & ~on_lathe(self.lathes, si)
+            landed |= lands
+            si_d[lands] = si
+            ds_here, importance_here = sensor.sample_direction(mi.Interaction3f(si), sampler.next_2d(), lands)
+            ds[lands] = ds_here
+            importance[lands] = importance_here
+            shadow = si.spawn_ray_to(ds_here.p)
+            pending = lands & (ds_here.pdf > 0.0)
+            active = valid & delta & (chain < self.max_chain)
+
+            # Eq. 11 at a specular vertex, as lathe_path does
+            cos_in_geo = dr.dot(si.n, -ray.d)
+            bad_in = active & (cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0)
+            geo_frame = mi.Frame3f(si.n)
+            if dr.hint(check == "terminate", mode="scalar"):
+                active &= ~bad_in
+            elif dr.hint(check == "fallback", mode="scalar"):
+                si = with_geometric_frame(si, bad_in, geo_frame)
+            sample_1, sample_2 = sampler.next_1d(), sampler.next_2d()
+            redraws = (sampler.next_1d(), sampler.next_2d())
+            bs, weight, wo_world = sample_with_fallback(
+                bsdf, ctx, si, si.wi, (sample_1, sample_2), redraws, cos_in_geo,
+                active & (check == "fallback"), active, geo_frame)[2:]
+            if dr.hint(check == "terminate", mode="scalar"):
+                reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
+                side = cos_in_geo * dr.dot(si.n, wo_world)
+                active &= ~dr.select(reflected, side <= 0.0, side >= 0.0)
+            beta[active] *= weight
+            ray = si.spawn_ray(wo_world)
+            chain += 1
+            active &= dr.max(beta) > 0.0
+
+        # ---------------- The camera connection at D ----------------
+        splat = landed & visible & (dr.max(importance) > 0.0)
+        wi_world = si_d.to_world(si_d.wi)
+        wo_local = si_d.to_local(ds.d)
+        wi_geo, wo_geo = dr.dot(si_d.n, wi_world), dr.dot(si_d.n, ds.d)
+        # Both directions on the side their shading cosines say (no light
+        # leaks through shading normals)
+        splat &= wi_geo * mi.Frame3f.cos_theta(si_d.wi) > 0.0
+        splat &= wo_geo * mi.Frame3f.cos_theta(wo_local) > 0.0
+        bsdf_d = si_d.bsdf()
+        value = bsdf_d.eval(ctx, si_d, wo_local, splat)
+        # The adjoint BSDF with shading normals (Veach 1997, eq. 5.17)
+        correction = dr.abs(mi.Frame3f.cos_theta(si_d.wi) * wo_geo
+                            / dr.maximum(dr.abs(wi_geo * mi.Frame3f.cos_theta(wo_local)), 1e-12))
+        # Eq. 32: path tracing's density of this path at D (its camera ray,
+        # then the BSDF sample from the camera's side towards the glass)
+        si_cam = mi.SurfaceInteraction3f(si_d)
+        si_cam.wi = wo_local
+        ctx_radiance = mi.BSDFContext()
+        pdf_bsdf = bsdf_d.pdf(ctx_radiance, si_cam, si_d.wi, splat)
+        path_density = (camera_density(sensor, si_d, ds.d, splat) * pdf_bsdf
+                        / dr.maximum(dr.abs(wi_geo), 1e-12))
+        weight = caustic_weight(light_density, path_density)
+        return ds.uv, beta * value * correction * importance * weight, splat

@@ -1,0 +1,256 @@
+"""Measurements of ``lathe_path``'s light-traced caustics (the library
+behind ``scripts/bench_caustics.py``).
+
+For each scene: a reference rendered by plain ``lathe_path``
+(``caustics=false``) at many samples per pixel, then plain and caustic
+renders at several sample counts, timed as medians of interleaved runs with
+warm kernels, and their relative mean absolute error (luminance) against the
+reference on three regions:
+
+* the **caustic region**: pixels seen directly on a surface that is not a
+  lathe, where the caustic paths (light -> glass -> surface, traced from the
+  light alone) carry at least 10% of the reference;
+* the **glass pixels**: pixels whose camera ray first meets a lathe;
+* the **whole image**.
+
+Printed: the error and time of each run; the time the caustic renders need to
+reach plain ``lathe_path``'s error at ``--target-spp`` in the caustic region
+(interpolated with error ~ 1/sqrt(time) from the nearest measured run) as a
+fraction of plain's time; the same on the glass pixels; and, with
+``--unbiased SPP``, the mean of a caustic render at that spp against the
+reference on each region.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["SCENES", "bench_parser", "caustic_image", "glass_mask", "regions", "run_bench"]
+
+#: The benchmark's scenes: name -> (XML path under the repository, edit of
+#: its text or None).
+SCENES = {
+    "bottle": ("scenes/brandy_bottle.xml", None),
+    "wine_glass": ("scenes/wine_glass.xml", None),
+    "sundae_cup": ("scenes/sundae_cup.xml", None),
+    # The paper's B-spline glass (scenes/paper/fig8b.xml lights it with point
+    # lights, whose caustics plain path tracing cannot render) under the
+    # wine glass scene's soft box
+    "paper_bspline": ("scenes/wine_glass.xml", "bspline"),
+}
+
+
+def _bspline_edit(root: str):
+    """An edit of scenes/wine_glass.xml that puts the paper's B-spline
+    glass in place of the wine glass."""
+    profile = os.path.join(root, "scenes", "paper", "glass_bspline.csv")
+
+    def edit(text: str, path: str) -> str:
+        text = text.replace('<string name="filename" value="wine_glass.csv"/>',
+                            f'<string name="filename" value="{profile}"/>\n'
+                            '        <string name="kind" value="bspline"/>')
+        if profile not in text:
+            raise RuntimeError(f"{path}: the wine glass's profile line was not found to replace")
+        return text
+    return edit
+
+
+def load(name: str, root: str, resolution: int) -> mi.Scene:
+    """The benchmark scene ``name`` at ``resolution`` squared."""
+    from ..tools.scenes import load_scene
+
+    path, edit = SCENES[name]
+    return load_scene(os.path.join(root, path), {"integrator": "lathe_path"}, (resolution, resolution),
+                      edit=_bspline_edit(root) if edit == "bspline" else None)
+
+
+def glass_mask(scene: mi.Scene) -> np.ndarray:
+    """(H, W) bool: pixels whose centre ray first meets an exact lathe."""
+    from ..plugin.caustic_paths import on_lathe
+    from ..plugin.scene_geometry import ExactSceneGeometry
+
+    sensor = scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().size())
+    index = dr.arange(mi.UInt32, width * height)
+    pixel = mi.Point2f(mi.Float(index % width) + 0.5, mi.Float(index // width) + 0.5)
+    ray, _ = sensor.sample_ray(0.0, 0.5, pixel / mi.ScalarPoint2f(width, height), mi.Point2f(0.5))
+    geometry = ExactSceneGeometry(scene)
+    si = geometry.ray_intersect(mi.Ray3f(ray), mi.Bool(True))
+    hit = si.is_valid() & on_lathe(geometry.lathes, si)
+    return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
+
+
+def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:
+    """(H, W, 3): the caustic paths alone (light -> specular chain ->
+    surface seen by the camera), traced from the lights with weight 1."""
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16})
+    sensor = scene.sensors()[0]
+    tracer, why = integrator.caustic_setup(scene, sensor)
+    if tracer is None:
+        raise RuntimeError(f"no caustic paths to trace: {why}")
+    film = sensor.film()
+    count = per_pixel * int(film.crop_size().x) * int(film.crop_size().y)
+    return np.array(tracer.render(scene, integrator.geometry(scene), sensor, seed, count,
+                                  mi.Float(float("inf"))))
+
+
+def luminance(image: np.ndarray) -> np.ndarray:
+    """(H, W): the mean of the RGB channels."""
+    return np.asarray(image, dtype=np.float64)[..., :3].mean(axis=-1)
+
+
+def regions(scene: mi.Scene, reference: np.ndarray, share: float = 0.1) -> dict[str, np.ndarray]:
+    """The three regions (see the module) as (H, W) bool masks."""
+    glass = glass_mask(scene)
+    caustic = luminance(caustic_image(scene, 64))
+    ref = luminance(reference)
+    return {"caustic": ~glass & (caustic >= share * np.maximum(ref, 1e-12)) & (ref > 0.0),
+            "glass": glass, "image": np.ones_like(glass)}
+
+
+def rel_mae(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
+    """Relative mean absolute error of the luminance on ``mask``."""
+    a, b = luminance(image)[mask], luminance(reference)[mask]
+    return float(np.abs(a - b).sum() / max(b.sum(), 1e-30))
+
+
+def timed_render(scene: mi.Scene, integrator: mi.Integrator, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """(image, seconds) of one render, evaluated."""
+    start = time.perf_counter()
+    image = mi.render(scene, integrator=integrator, spp=spp, seed=seed)
+    dr.eval(image)
+    image = np.array(image)
+    return image, time.perf_counter() - start
+
+
+def reference_image(scene: mi.Scene, name: str, resolution: int, spp: int, cache: str) -> np.ndarray:
+    """Plain ``lathe_path`` at ``spp`` (cached in ``cache``), rendered in
+    passes of 256 spp."""
+    path = os.path.join(cache, f"caustics_ref_{name}_{resolution}_{spp}.npy")
+    if os.path.exists(path):
+        return np.load(path)
+    plain = mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": False})
+    passes = max(1, spp // 256)
+    total = None
+    for index in range(passes):
+        image = np.array(mi.render(scene, integrator=plain, spp=spp // passes, seed=100000 + index),
+                         dtype=np.float64)
+        total = image if total is None else total + image
+    reference = total / passes
+    np.save(path, reference)
+    return reference
+
+
+def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[int], repeats: int,
+            caustic_paths: float) -> dict:
+    """{(method, spp): {"time": median s, region: mean error}} over
+    ``repeats`` interleaved rounds (after one warm-up render each)."""
+    integrators = {
+        "plain": mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": False}),
+        "caustics": mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": True,
+                                  "caustic_paths": caustic_paths}),
+    }
+    for integrator in integrators.values():
+        timed_render(scene, integrator, spp_list[0], 0)
+    runs: dict = {}
+    for round_index in range(repeats):
+        for spp in spp_list:
+            for method, integrator in integrators.items():
+                image, seconds = timed_render(scene, integrator, spp, 1 + round_index)
+                entry = runs.setdefault((method, spp), {"times": [], **{k: [] for k in masks}})
+                entry["times"].append(seconds)
+                for region, mask in masks.items():
+                    entry[region].append(rel_mae(image, reference, mask))
+    return {key: {"time": statistics.median(v["times"]), **{k: float(np.mean(v[k])) for k in masks}}
+            for key, v in runs.items()}
+
+
+def time_to_error(results: dict, method: str, region: str, target: float) -> float:
+    """Seconds ``method`` needs to reach ``target`` error on ``region``,
+    from its run nearest to it, with error ~ 1/sqrt(time)."""
+    runs = [(v[region], v["time"]) for (m, _), v in results.items() if m == method]
+    error, seconds = min(runs, key=lambda run: abs(np.log(run[0] / target)))
+    return seconds * (error / target) ** 2
+
+
+def bench_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="bench_caustics.py", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="+", default=["bottle", "wine_glass"], choices=sorted(SCENES))
+    parser.add_argument("--resolution", type=int, default=256)
+    parser.add_argument("--reference-spp", type=int, default=4096)
+    parser.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256])
+    parser.add_argument("--target-spp", type=int, default=256,
+                        help="plain lathe_path's spp whose caustic-region error is the target")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--caustic-paths", type=float, default=1.0)
+    parser.add_argument("--unbiased", type=int, default=0, metavar="SPP",
+                        help="also render with caustics at SPP and compare its means with the reference")
+    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "lathe_caustics_bench"))
+    parser.add_argument("--root", default=os.getcwd(), help="the repository (for scenes/)")
+    parser.add_argument("--save", default=None, metavar="FOLDER",
+                        help="write the 16 spp images (plain, caustics) and the reference as EXR here")
+    return parser
+
+
+def run_bench(argv: list[str] | None = None) -> int:
+    args = bench_parser().parse_args(argv)
+    mi.set_variant(args.variant)
+    import lathe_shape  # noqa: F401  (registers the plugins)
+
+    os.makedirs(args.cache, exist_ok=True)
+    print(f"variant {args.variant}, {args.resolution}x{args.resolution}, reference: plain lathe_path at "
+          f"{args.reference_spp} spp; errors: relative MAE of the luminance; times: medians of "
+          f"{args.repeats} interleaved runs")
+    for name in args.scenes:
+        scene = load(name, args.root, args.resolution)
+        reference = reference_image(scene, name, args.resolution, args.reference_spp, args.cache)
+        masks = regions(scene, reference)
+        sizes = {region: int(mask.sum()) for region, mask in masks.items()}
+        print(f"\n== {name}: caustic region {sizes['caustic']} px, glass {sizes['glass']} px")
+        spp_list = sorted(set(args.spp) | {args.target_spp})
+        results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths)
+        print(f"{'method':>9} {'spp':>5} {'time s':>8} {'caustic':>8} {'glass':>8} {'image':>8}")
+        for (method, spp), v in sorted(results.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+            errors = " ".join(f"{v[region]:>8.4f}" for region in ("caustic", "glass", "image"))
+            print(f"{method:>9} {spp:>5} {v['time']:>8.3f} {errors}")
+        plain_target = results[("plain", args.target_spp)]
+        for region in ("caustic", "glass", "image"):
+            target = plain_target[region]
+            ratio = time_to_error(results, "caustics", region, target) / plain_target["time"]
+            print(f"{region:>8}: time to plain {args.target_spp} spp's error {target:.4f}: "
+                  f"{ratio:.3f} of plain's {plain_target['time']:.2f} s")
+        for spp in spp_list:
+            print(f"cost per sample at {spp} spp: caustics/plain = "
+                  f"{results[('caustics', spp)]['time'] / results[('plain', spp)]['time']:.2f}")
+        if args.save:
+            from ..tools.images import write_exr
+
+            os.makedirs(args.save, exist_ok=True)
+            write_exr(os.path.join(args.save, f"{name}_reference.exr"), reference.astype(np.float32))
+            for method in ("plain", "caustics"):
+                integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16,
+                                           "caustics": method == "caustics"})
+                image, _ = timed_render(scene, integrator, 16, 1)
+                write_exr(os.path.join(args.save, f"{name}_{method}_16spp.exr"), image)
+        if args.unbiased:
+            integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": True,
+                                       "caustic_paths": args.caustic_paths})
+            image = np.zeros_like(reference)
+            passes = max(1, args.unbiased // 256)
+            for index in range(passes):
+                image += np.array(mi.render(scene, integrator=integrator, spp=args.unbiased // passes,
+                                            seed=200000 + index)) / passes
+            for region, mask in masks.items():
+                mean, ref_mean = luminance(image)[mask].mean(), luminance(reference)[mask].mean()
+                print(f"unbiased, {args.unbiased} spp, {region}: mean {mean:.5f} vs reference {ref_mean:.5f} "
+                      f"({100 * (mean / ref_mean - 1):+.2f}%), rel MAE {rel_mae(image, reference, mask):.4f}")
+    return 0

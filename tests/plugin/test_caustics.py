@@ -1,0 +1,182 @@
+"""``lathe_path``'s light-traced caustics (``caustics``, eqs. 32-33):
+unbiased against plain path tracing, the two techniques' weights summing to
+one, point-light caustics that path tracing cannot find, the film holding
+what the render returns, a crop window, no NaN or Inf at grazing angles and
+total internal reflection, and the parameters' errors."""
+
+from __future__ import annotations
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0.0, np.pi, 65))
+
+
+def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
+               crop: tuple | None = None) -> mi.Scene:
+    """A glass ball (a lathe, radius 1, resting 0.2 above a white floor)
+    lit from above by a small square area light, a point light or a small
+    sphere light (``light``) of about the same intensity, seen from the side
+    so that the caustic under the ball is on the film."""
+    film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}
+    if crop:
+        film.update(crop_offset_x=crop[0], crop_offset_y=crop[1], crop_width=crop[2], crop_height=crop[3])
+    scene = {
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 45,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, -5, 4], target=[0, 0, 0.6],
+                                                              up=[0, 0, 1]),
+                   "film": film, "sampler": {"type": "independent"}},
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1]),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.7]}}},
+        "ball": {"type": "lathe", "profile": BALL, "mesh_segments": 128,
+                 "bsdf": {"type": "dielectric", "int_ior": 1.33}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}},
+    }
+    # Intensity 40 straight down in each case
+    if light == "area":
+        scene["light"] = {"type": "rectangle",
+                          "to_world": mi.ScalarTransform4f().translate([0.3, 3.0, light_z]).scale([0.25, 0.25, 1])
+                          @ mi.ScalarTransform4f().rotate([1, 0, 0], 145),
+                          "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [160.0] * 3}}}
+    elif light == "point":
+        scene["light"] = {"type": "point", "position": [0.3, 3.0, light_z],
+                          "intensity": {"type": "rgb", "value": [40.0] * 3}}
+    else:  # a small sphere: intensity pi r^2 L
+        radius = 0.02
+        scene["light"] = {"type": "sphere", "center": [0.3, 3.0, light_z], "radius": radius,
+                          "emitter": {"type": "area",
+                                      "radiance": {"type": "rgb", "value": [40.0 / (np.pi * radius**2)] * 3}}}
+    return mi.load_dict(scene)
+
+
+def render(scene: mi.Scene, spp: int, seed: int = 0, **params) -> np.ndarray:
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 12, **params})
+    return np.array(mi.render(scene, integrator=integrator, spp=spp, seed=seed), dtype=np.float64)
+
+
+def luminance(image: np.ndarray) -> np.ndarray:
+    return image[..., :3].mean(axis=-1)
+
+
+@pytest.fixture(scope="module")
+def area_scene() -> mi.Scene:
+    return ball_scene("area")
+
+
+@pytest.fixture(scope="module")
+def caustic_region(area_scene) -> np.ndarray:
+    """Pixels where light-traced caustic paths carry at least 20% of the image."""
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    caustic = luminance(caustic_image(area_scene, 256))
+    full = luminance(render(area_scene, 256, seed=99))
+    region = caustic > 0.2 * full
+    assert region.sum() >= 20, "the test scene's caustic must be on the film"
+    return region
+
+
+def test_caustics_agree_with_plain_path_tracing(area_scene, caustic_region):
+    """The caustic region's mean and the image's mean: caustics on at 256 spp
+    against plain lathe_path at 8192 spp (whose caustic converges slowly:
+    its own noise is part of the tolerance)."""
+    plain = np.mean([luminance(render(area_scene, 2048, seed=s, caustics=False)) for s in range(4)], axis=0)
+    traced = luminance(render(area_scene, 256, seed=11))
+    assert traced[caustic_region].mean() == pytest.approx(plain[caustic_region].mean(), rel=0.03)
+    assert traced.mean() == pytest.approx(plain.mean(), rel=0.01)
+    # and the caustic is much less noisy than plain's at the same spp
+    plain_256 = luminance(render(area_scene, 256, seed=12, caustics=False))
+    error_traced = np.abs(traced - plain)[caustic_region].mean()
+    error_plain = np.abs(plain_256 - plain)[caustic_region].mean()
+    assert error_traced < 0.5 * error_plain
+
+
+def test_weights_of_the_two_techniques_sum_to_one(area_scene, caustic_region):
+    """Eq. 32 with almost all weight on path tracing (few particles) and
+    almost all on the light tracer (many): the same image in expectation.
+    A weight counted twice or missed shows as a difference in the mean."""
+    few = np.mean([luminance(render(area_scene, 512, seed=s, caustic_paths=0.01)) for s in range(3)], axis=0)
+    many = luminance(render(area_scene, 64, seed=5, caustic_paths=16.0))
+    assert many[caustic_region].mean() == pytest.approx(few[caustic_region].mean(), rel=0.03)
+    assert many.mean() == pytest.approx(few.mean(), rel=0.01)
+
+
+def test_point_light_caustic_matches_a_small_sphere_light():
+    """Path tracing cannot find a point light's caustic (the light cannot be
+    hit): plain lathe_path leaves the floor under the ball in shadow. The
+    light tracer finds it, as bright as a tiny sphere light's of the same
+    intensity (itself light-traced, weighted against path tracing)."""
+    point, sphere = ball_scene("point"), ball_scene("sphere")
+    traced_point = luminance(render(point, 64, seed=1))
+    traced_sphere = luminance(render(sphere, 64, seed=2))
+    plain_point = luminance(render(point, 64, seed=3, caustics=False))
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    region = luminance(caustic_image(point, 64)) > 0.2 * traced_point
+    assert region.sum() >= 20
+    assert traced_point[region].mean() == pytest.approx(traced_sphere[region].mean(), rel=0.03)
+    assert plain_point[region].mean() < 0.3 * traced_point[region].mean()
+
+
+def test_film_holds_the_returned_image(area_scene):
+    integrator = mi.load_dict({"type": "lathe_path", "aovs": "albedo"})
+    image = np.array(mi.render(area_scene, integrator=integrator, spp=16))
+    film = np.array(area_scene.sensors()[0].film().bitmap())
+    assert image.shape == film.shape == (48, 48, 6)
+    assert np.array_equal(image, film)
+
+
+def test_crop_window_gets_the_same_caustic():
+    """The caustic splats land on the cropped film where they land on the
+    full one (the film's crop offset)."""
+    full = luminance(render(ball_scene("point"), 64, seed=4))
+    crop = luminance(render(ball_scene("point", crop=(8, 12, 16, 14)), 64, seed=5))
+    assert crop.shape == (14, 16)
+    window = full[12:26, 8:24]
+    assert crop.mean() == pytest.approx(window.mean(), rel=0.03)
+
+
+@pytest.mark.parametrize("light_z", [1.25, 2.5])
+def test_grazing_and_total_internal_reflection_give_finite_values(light_z):
+    """A light just above the ball and level with its top: particles meet
+    the glass at grazing angles and are totally reflected inside it; 1M
+    particles, every value finite and none negative."""
+    scene = ball_scene("area", res=64, light_z=light_z)
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 12})
+    sensor = scene.sensors()[0]
+    tracer, why = integrator.caustic_setup(scene, sensor)
+    assert tracer is not None, why
+    sampler = mi.load_dict({"type": "independent"})
+    size = 1 << 20
+    sampler.seed(3, size)
+    pos, value, splat = tracer._trace(scene, integrator.geometry(scene), sensor, sampler, size, mi.Float(1.0))
+    value = np.array(value).T[np.array(splat)]
+    assert value.shape[0] > 1000
+    assert np.isfinite(value).all()
+    assert (value >= 0.0).all()
+
+
+PATHS_ERROR = "lathe_path: parameter 'caustic_paths' must be > 0 and finite; got "
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"caustic_paths": 0.0}, PATHS_ERROR + "0.0"),
+    ({"caustic_paths": float("nan")}, PATHS_ERROR + "nan"),
+    ({"caustic_max_chain": 0}, "lathe_path: parameter 'caustic_max_chain' must be >= 1; got 0"),
+])
+def test_parameter_errors(params, message):
+    with pytest.raises(Exception) as error:
+        mi.load_dict({"type": "lathe_path", **params})
+    assert message in str(error.value)
+
+
+def test_caustics_off_leaves_path_tracing_bit_for_bit(area_scene):
+    """Without lights to trace from (a sky only), the caustic pass is
+    skipped and the render is plain lathe_path's, bit for bit."""
+    scene = mi.load_dict({"type": "scene", "sensor": area_scene.sensors()[0],
+                          "ball": {"type": "lathe", "profile": BALL, "bsdf": {"type": "dielectric"}},
+                          "sky": {"type": "constant"}})
+    on = render(scene, 4, seed=2)
+    off = render(scene, 4, seed=2, caustics=False)
+    assert np.array_equal(on, off)
