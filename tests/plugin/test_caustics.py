@@ -37,7 +37,8 @@ def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
     # Intensity 40 straight down in each case
     if light == "area":
         place = mi.ScalarTransform4f().translate([0.3, 3.0, light_z]).scale([0.25, 0.25, 1])
-        scene["light"] = {"type": "rectangle", "to_world": place @ mi.ScalarTransform4f().rotate([1, 0, 0], 145),
+        tilt = mi.ScalarTransform4f().rotate([1, 0, 0], 145)
+        scene["light"] = {"type": "rectangle", "to_world": place @ tilt,
                           "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [160.0] * 3}}}
     elif light == "point":
         scene["light"] = {"type": "point", "position": [0.3, 3.0, light_z],
