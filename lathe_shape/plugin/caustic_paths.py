@@ -25,10 +25,10 @@ importance sampling (the power heuristic) and nothing is counted twice:
   spot light's caustic at all: there the light tracer's weight is 1.
 
 The light tracer aims its particles at the lathes: directions are drawn
-uniformly in the cone from the light point to a sphere around every exact
-lathe (eq. 33), and the same cone density enters the weights, so
-directions outside it belong to path tracing alone. The estimator stays
-unbiased for any cone.
+uniformly in the cone from the light point around one of a few spheres that
+cover every exact lathe (eq. 33), and the same density enters the weights,
+so directions outside the cones belong to path tracing alone. The estimator
+stays unbiased for any spheres.
 
 Limits (each falls back to path tracing alone, unbiased): RGB variants,
 a ``perspective`` sensor, not with ``hide_emitters``; environment and
@@ -132,14 +132,35 @@ def caustic_weight(own: mi.Float, other: mi.Float) -> mi.Float:
     return dr.select(dr.isinf(own), 1.0, dr.select(own2 > 0.0, own2 / (own2 + other2), 0.0))
 
 
-def camera_density(sensor: mi.Sensor, si: mi.SurfaceInteraction3f, to_camera: mi.Vector3f,
-                   active: mi.Bool) -> mi.Float:
-    """Eq. 32: the area density at ``si`` of a camera ray through the whole
-    film (the sensor's importance over the squared distance, times the
-    cosine at ``si``), for a pinhole ``perspective`` sensor."""
-    it = mi.Interaction3f(si)
-    _, importance = sensor.sample_direction(it, mi.Point2f(0.5), active)
-    return dr.select(active, importance.x * dr.abs(dr.dot(si.n, to_camera)), 0.0)
+class PinholeCamera:
+    """What eq. 32 needs of a pinhole ``perspective`` sensor: its position,
+    viewing direction and the area of its film at unit distance (read from
+    the sensor's own importance straight ahead)."""
+
+    def __init__(self, sensor: mi.Sensor) -> None:
+        matrix = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        forward = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+        self.origin = [float(v) for v in matrix[:3, 3]]
+        self.forward = [float(v) for v in forward]
+        # The importance along the ray through the film's centre
+        ray = sensor.sample_ray(0.0, 0.5, mi.Point2f(0.5), mi.Point2f(0.5))[0]
+        ahead = dr.zeros(mi.Interaction3f, 1)
+        ahead.p = ray.o + ray.d
+        importance = sensor.sample_direction(ahead, mi.Point2f(0.5))[1]
+        cos_centre = float(dr.dot(ray.d, mi.Vector3f(self.forward)).numpy()[0])
+        #: The film's area on the plane at unit distance (1 / importance there).
+        self.film_area = 1.0 / (float(importance.x.numpy()[0]) * cos_centre**3)
+
+    def density(self, p: mi.Point3f, n: mi.Normal3f) -> mi.Float:
+        """Eq. 32: the area density at ``p`` (normal ``n``) of a camera ray
+        drawn uniformly over the whole film: 1 / (film area cos^3) per unit
+        solid angle, times |cos| at ``p`` over the squared distance."""
+        to_p = p - mi.Point3f(self.origin)
+        dist2 = dr.squared_norm(to_p)
+        d = to_p * dr.rsqrt(dist2)
+        cos_camera = dr.dot(d, mi.Vector3f(self.forward))
+        solid_angle = dr.rcp(self.film_area * dr.maximum(cos_camera, 1e-6) ** 3)
+        return dr.select(cos_camera > 0.0, solid_angle * dr.abs(dr.dot(n, d)) / dist2, 0.0)
 
 
 def chain_length_limit(max_depth: int, max_chain: int) -> int:
@@ -154,8 +175,11 @@ class CausticTracer:
     which lights send particles, the sphere they aim at, and the pass that
     traces them (:meth:`render`). Made by the integrator each render."""
 
-    def __init__(self, scene: mi.Scene, lathes: list, max_chain: int, normal_check: str) -> None:
+    def __init__(self, scene: mi.Scene, sensor: mi.Sensor, lathes: list, max_chain: int,
+                 normal_check: str) -> None:
         self.lathes = lathes
+        #: The sensor's pinhole camera (eq. 32).
+        self.camera = PinholeCamera(sensor)
         self.max_chain = max_chain
         self.normal_check = normal_check
         emitters = scene.emitters()
@@ -334,7 +358,7 @@ class CausticTracer:
         si_cam.wi = wo_local
         ctx_radiance = mi.BSDFContext()
         pdf_bsdf = bsdf_d.pdf(ctx_radiance, si_cam, si_d.wi, splat)
-        path_density = (camera_density(sensor, si_d, ds.d, splat) * pdf_bsdf
+        path_density = (self.camera.density(si_d.p, si_d.n) * pdf_bsdf
                         / dr.maximum(dr.abs(wi_geo), 1e-12))
         weight = caustic_weight(light_density, path_density)
         return ds.uv, beta * value * correction * importance * weight, splat

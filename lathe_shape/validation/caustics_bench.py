@@ -102,6 +102,12 @@ def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:
                                   mi.Float(float("inf"))))
 
 
+def path_integrator(caustics: bool, caustic_paths: float = 0.05) -> mi.Integrator:
+    """``lathe_path`` (``max_depth`` 16) with or without ``caustics``."""
+    return mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": caustics,
+                         "caustic_paths": caustic_paths})
+
+
 def luminance(image: np.ndarray) -> np.ndarray:
     """(H, W): the mean of the RGB channels."""
     return np.asarray(image, dtype=np.float64)[..., :3].mean(axis=-1)
@@ -137,7 +143,7 @@ def reference_image(scene: mi.Scene, name: str, resolution: int, spp: int, cache
     path = os.path.join(cache, f"caustics_ref_{name}_{resolution}_{spp}.npy")
     if os.path.exists(path):
         return np.load(path)
-    plain = mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": False})
+    plain = path_integrator(False)
     passes = max(1, spp // 256)
     total = None
     for index in range(passes):
@@ -153,11 +159,7 @@ def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[
             caustic_paths: float) -> dict:
     """{(method, spp): {"time": median s, region: mean error}} over
     ``repeats`` interleaved rounds (after one warm-up render each)."""
-    integrators = {
-        "plain": mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": False}),
-        "caustics": mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": True,
-                                  "caustic_paths": caustic_paths}),
-    }
+    integrators = {"plain": path_integrator(False), "caustics": path_integrator(True, caustic_paths)}
     for integrator in integrators.values():
         timed_render(scene, integrator, spp_list[0], 0)
     runs: dict = {}
@@ -190,7 +192,7 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--target-spp", type=int, default=256,
                         help="plain lathe_path's spp whose caustic-region error is the target")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--caustic-paths", type=float, default=1.0)
+    parser.add_argument("--caustic-paths", type=float, default=0.05)
     parser.add_argument("--unbiased", type=int, default=0, metavar="SPP",
                         help="also render with caustics at SPP and compare its means with the reference")
     parser.add_argument("--variant", default="llvm_ad_rgb")
@@ -198,6 +200,8 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--root", default=os.getcwd(), help="the repository (for scenes/)")
     parser.add_argument("--save", default=None, metavar="FOLDER",
                         help="write the 16 spp images (plain, caustics) and the reference as EXR here")
+    parser.add_argument("--figure", default=None, metavar="PNG",
+                        help="write the first scene's 16 spp frames, plain and with caustics, side by side")
     return parser
 
 
@@ -237,13 +241,23 @@ def run_bench(argv: list[str] | None = None) -> int:
             os.makedirs(args.save, exist_ok=True)
             write_exr(os.path.join(args.save, f"{name}_reference.exr"), reference.astype(np.float32))
             for method in ("plain", "caustics"):
-                integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16,
-                                           "caustics": method == "caustics"})
+                integrator = path_integrator(method == "caustics", args.caustic_paths)
                 image, _ = timed_render(scene, integrator, 16, 1)
                 write_exr(os.path.join(args.save, f"{name}_{method}_16spp.exr"), image)
+        if args.figure and name == args.scenes[0]:
+            from ..tools.images import write_png
+
+            frames = []
+            for method in ("plain", "caustics"):
+                integrator = path_integrator(method == "caustics", args.caustic_paths)
+                image, _ = timed_render(scene, integrator, 16, 1)
+                errors = ", ".join(f"{region} {rel_mae(image, reference, mask):.3f}"
+                                   for region, mask in masks.items())
+                print(f"figure, 16 spp, {method}: {errors}")
+                frames.append(image[..., :3])
+            write_png(args.figure, np.concatenate(frames, axis=1))
         if args.unbiased:
-            integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": True,
-                                       "caustic_paths": args.caustic_paths})
+            integrator = path_integrator(True, args.caustic_paths)
             image = np.zeros_like(reference)
             passes = max(1, args.unbiased // 256)
             for index in range(passes):
