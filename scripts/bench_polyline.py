@@ -12,7 +12,10 @@ as ratios measured in one run.
    into IR assembly (codegen), compilation (backend) and execution.
 
 Times are medians of --repeat interleaved renders (A B C A B C ...) after a
-warm-up render of each case, with their min-max spread.
+warm-up render of each case, with their min-max spread. `lathe_path` runs
+with `caustics` false, as stock `path` has no light-traced caustic paths:
+the ratios compare the intersections; what the caustic paths cost and gain
+is `scripts/bench_caustics.py`'s.
 
     python scripts/bench_polyline.py [--resolution 256x256] [--spp 16] [--max-depth 8 16] [--repeat 5]
                                      [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...] [--no-cold]
@@ -77,7 +80,7 @@ def exact_against_meshes(args, name: str, max_depth: int) -> None:
         args.spp, args.seed)
     cases = {
         "default": (scene, mi.load_dict({"type": "path", "max_depth": max_depth})),
-        "exact": (scene, mi.load_dict({"type": "lathe_path", "max_depth": max_depth})),
+        "exact": (scene, mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "caustics": False})),
     }
     if coarse is not None:
         coarse_scene = bench_scene(args, scene_file, mesh_segments=str(coarse), **depth)
@@ -113,7 +116,8 @@ def main() -> None:
     for segments in (31, 86, 300, 1000):
         scene = bench_scene(args, ROOT / "scenes" / "wine_glass.xml", goblet_profile(segments),
                             mesh_segments="64", max_depth=str(args.max_depths[0]))
-        cases[segments] = (scene, mi.load_dict({"type": "lathe_path", "max_depth": args.max_depths[0]}))
+        cases[segments] = (scene, mi.load_dict({"type": "lathe_path", "max_depth": args.max_depths[0],
+                                                "caustics": False}))
     times = interleaved_render_times(cases, args.spp, args.repeat, args.seed)
     base = median_spread(times[31])[0]
     print(f"{'segments':>9}{'lathe_path [s]':>24}{'vs 31':>9}")
