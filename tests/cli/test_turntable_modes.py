@@ -33,9 +33,9 @@ def wine_without_caustics(size: int = 32) -> mi.Scene:
     drawn in the light's frame, which a world turn rotates, so they are not
     the orbit's particles seen from elsewhere (the path-traced samples are)."""
     def edit(text: str, path: str) -> str:
-        assert '<integrator type="$integrator">' in text
-        return text.replace('<integrator type="$integrator">',
-                            '<integrator type="$integrator">\n        <boolean name="caustics" value="false"/>')
+        opening = '<integrator type="$integrator">'
+        assert opening in text
+        return text.replace(opening, opening + '\n        <boolean name="caustics" value="false"/>')
     return load_scene(WINE, EXACT, (size, size), edit=edit)
 
 
