@@ -183,6 +183,17 @@ def time_to_error(results: dict, method: str, region: str, target: float) -> flo
     return seconds * (error / target) ** 2
 
 
+def noise_floor(results: dict, region: str, reference_spp: int, spp: int) -> float:
+    """The rel MAE two independent unbiased renders would show on
+    ``region``: the reference's own error (plain at ``reference_spp``) and
+    the caustic render's at ``spp``, each scaled from its measured run with
+    the most samples as 1/sqrt(spp), added in quadrature."""
+    def scaled(method: str, target: int) -> float:
+        spp_run = max(s for m, s in results if m == method)
+        return results[(method, spp_run)][region] * (spp_run / target) ** 0.5
+    return float(np.hypot(scaled("plain", reference_spp), scaled("caustics", spp)))
+
+
 def bench_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bench_caustics.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", default=["bottle", "wine_glass"], choices=sorted(SCENES))
@@ -265,6 +276,8 @@ def run_bench(argv: list[str] | None = None) -> int:
                                             seed=200000 + index)) / passes
             for region, mask in masks.items():
                 mean, ref_mean = luminance(image)[mask].mean(), luminance(reference)[mask].mean()
+                floor = noise_floor(results, region, args.reference_spp, args.unbiased)
+                error = rel_mae(image, reference, mask)
                 print(f"unbiased, {args.unbiased} spp, {region}: mean {mean:.5f} vs reference {ref_mean:.5f} "
-                      f"({100 * (mean / ref_mean - 1):+.2f}%), rel MAE {rel_mae(image, reference, mask):.4f}")
+                      f"({100 * (mean / ref_mean - 1):+.2f}%), rel MAE {error:.4f}, noise floor {floor:.4f}")
     return 0
