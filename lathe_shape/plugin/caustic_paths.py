@@ -189,16 +189,20 @@ class CausticTracer:
             if mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
             or (mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition))
         ]
+        #: The lathes whose BSDF is a pure Dirac delta (glass, mirrors): the
+        #: particles aim at these alone (a diffuse vase makes no caustic).
+        self.specular_lathes = [lathe for lathe in lathes
+                                if not mi.has_flag(lathe.bsdf().flags(), mi.BSDFFlags.Smooth)]
         #: The spheres that particles aim at (eq. 33).
-        self.spheres = aim_spheres(lathes)
+        self.spheres = aim_spheres(self.specular_lathes)
         centres = [centre for centre, _ in self.spheres]
         self.sphere_centres = np.array(centres, dtype=np.float32).reshape(-1, 3)
         self.sphere_radii = np.array([radius for _, radius in self.spheres], dtype=np.float32)
 
     @property
     def active(self) -> bool:
-        """Whether there is anything to trace (lights and lathes)."""
-        return bool(self.light_indices) and bool(self.lathes) and self.max_chain >= 1
+        """Whether there is anything to trace (lights and specular lathes)."""
+        return bool(self.light_indices) and bool(self.specular_lathes) and self.max_chain >= 1
 
     def light_density(self, p_area: mi.Float, cos_light: mi.Float, p: mi.Point3f,
                       d: mi.Vector3f) -> mi.Float:

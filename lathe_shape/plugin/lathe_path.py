@@ -193,7 +193,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                                    self.caustic_max_chain)
         geometry = self.geometry(scene)
         tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check)
-        return (tracer, "") if tracer.active else (None, "no lathes or no area, point or spot lights")
+        return (tracer, "") if tracer.active else (
+            None, "no lathe with a Dirac-delta BSDF, or no area, point or spot light")
 
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
                develop: bool = True, evaluate: bool = True) -> mi.TensorXf:

@@ -171,12 +171,23 @@ def test_parameter_errors(params, message):
     assert message in str(error.value)
 
 
-def test_caustics_off_leaves_path_tracing_bit_for_bit(area_scene):
-    """Without lights to trace from (a sky only), the caustic pass is
-    skipped and the render is plain lathe_path's, bit for bit."""
-    scene = mi.load_dict({"type": "scene", "sensor": area_scene.sensors()[0],
-                          "ball": {"type": "lathe", "profile": BALL, "bsdf": {"type": "dielectric"}},
-                          "sky": {"type": "constant"}})
+@pytest.mark.parametrize("case", ["sky only", "diffuse lathe"])
+def test_nothing_to_trace_leaves_path_tracing_bit_for_bit(area_scene, case):
+    """Without a light to send particles (a sky only), or without a lathe
+    whose BSDF is a Dirac delta (a diffuse vase under an area light), the
+    caustic pass is skipped and the render is plain lathe_path's, bit for
+    bit."""
+    scene = {"type": "scene", "sensor": area_scene.sensors()[0],
+             "ball": {"type": "lathe", "profile": BALL, "bsdf": {"type": "dielectric"}},
+             "sky": {"type": "constant"}}
+    if case == "diffuse lathe":
+        scene["ball"]["bsdf"] = {"type": "diffuse"}
+        scene["light"] = {"type": "point", "position": [0.3, 3.0, 5.0]}
+    scene = mi.load_dict(scene)
+    integrator = mi.load_dict({"type": "lathe_path"})
+    tracer, why = integrator.caustic_setup(scene, scene.sensors()[0])
+    assert tracer is None
+    assert why == ("no lathe with a Dirac-delta BSDF, or no area, point or spot light")
     on = render(scene, 4, seed=2)
     off = render(scene, 4, seed=2, caustics=False)
     assert np.array_equal(on, off)
