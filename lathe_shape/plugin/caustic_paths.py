@@ -16,7 +16,7 @@ importance sampling (the power heuristic) and nothing is counted twice:
   lathe nor a pure Dirac delta and sampled with its smooth lobes; ``S_1 ...
   S_k`` (``1 <= k <= max_chain``) surfaces whose BSDF is pure Dirac
   delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``); and the
-  light an area emitter, a point or a spot light.
+  light an area emitter, a point, spot or directional light.
 * Every other path is path traced alone, as before.
 * On a caustic path, the two techniques' densities share the chain's
   generalized geometry term, which cancels in their ratio: eq. 32 of
@@ -30,9 +30,13 @@ cover every exact lathe (eq. 33), and the same density enters the weights,
 so directions outside the cones belong to path tracing alone. The estimator
 stays unbiased for any spheres.
 
+A directional light's particles come from far back through a point drawn
+uniformly on the disk of one of those spheres that faces the light (eq. 34);
+path tracing cannot hit a directional light either.
+
 Limits (each falls back to path tracing alone, unbiased): RGB variants,
-a ``perspective`` sensor, not with ``hide_emitters``; environment and
-directional lights send no particles.
+a ``perspective`` sensor, not with ``hide_emitters``; environment lights
+send no particles.
 """
 
 from __future__ import annotations
@@ -46,7 +50,7 @@ import numpy as np
 from .integrator_base import sample_with_fallback, with_geometric_frame
 from .line_walk import start_walk
 
-__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "on_lathe", "pure_delta"]
+__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe", "pure_delta"]
 
 #: Margin of the aiming spheres over the lathes' tessellated profiles (a
 #: B-spline's curve may bulge past its points between them).
@@ -124,6 +128,19 @@ def aim_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
     return total / len(spheres)
 
 
+def disk_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
+    """Eq. 34: the density per unit area, across the direction ``d``, of
+    the line through ``p`` drawn by a directional light's particles (a
+    sphere of ``spheres`` chosen uniformly, then a point uniformly on its
+    disk facing ``d``)."""
+    total = mi.Float(0.0)
+    for centre, radius in spheres:
+        v = mi.Point3f(centre) - p
+        across2 = dr.squared_norm(v) - dr.square(dr.dot(v, d))
+        total += dr.select(across2 <= radius * radius, 1.0 / (math.pi * radius * radius), 0.0)
+    return total / len(spheres)
+
+
 def caustic_weight(own: mi.Float, other: mi.Float) -> mi.Float:
     """Eq. 32: the power-heuristic weight of the technique with density
     ``own`` against ``other`` (each already multiplied by its sample count;
@@ -187,8 +204,12 @@ class CausticTracer:
         self.light_indices = [
             index for index, emitter in enumerate(emitters)
             if mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
-            or (mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition))
+            or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
+            or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaDirection)
         ]
+        #: How far back a directional light's particles start (beyond the scene).
+        box = scene.bbox()
+        self.far = 2.0 * float(dr.norm(box.extents())) + 1.0 if box.valid() else 1e4
         #: The lathes whose BSDF is a pure Dirac delta (glass, mirrors): the
         #: particles aim at these alone (a diffuse vase makes no caustic).
         self.specular_lathes = [lathe for lathe in lathes
@@ -285,8 +306,22 @@ class CausticTracer:
         # tracing cannot hit it)
         area_density = per_camera_sample * ps.pdf * p_cone / (lights * dr.maximum(cos_light, 1e-12))
         light_density = dr.select(is_delta, dr.inf, area_density)
+        # Directional light: a point on the disk of the chosen sphere facing
+        # the light, the particle coming from far back through it (eq. 34)
+        is_directional = mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaDirection)
+        it_centre = dr.zeros(mi.Interaction3f, size)
+        it_centre.p = centre
+        sun, irradiance = emitter.sample_direction(it_centre, mi.Point2f(0.5), is_directional)
+        disk = mi.warp.square_to_uniform_disk_concentric(sampler.next_2d()) * radius
+        through = centre + mi.Frame3f(sun.d).to_world(mi.Vector3f(disk.x, disk.y, 0.0))
+        p_disk = disk_pdf(spheres, through, sun.d)
+        d = dr.select(is_directional, -sun.d, d)
+        beta = dr.select(is_directional, irradiance * (lights / dr.maximum(p_disk, 1e-30)), beta)
+        light_density = dr.select(is_directional, dr.inf, light_density)
         origin = dr.zeros(mi.SurfaceInteraction3f, size)
-        origin.p, origin.n, origin.time = ps.p, dr.select(is_delta, 0.0, ps.n), ps.time
+        origin.p = dr.select(is_directional, through + sun.d * self.far, ps.p)
+        origin.n = dr.select(is_delta | is_directional, 0.0, ps.n)
+        origin.time = ps.time
 
         ray = origin.spawn_ray(d)                 # Current ray of the particle
         walk = start_walk(size)                   # Its line and last lathe crossing

@@ -119,7 +119,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
      * - caustics
        - |bool|
        - Also trace caustic paths from the lights: particles sent from area,
-         point and spot lights towards the lathes, through glass (Dirac delta
+         point, spot and directional lights towards the lathes, through glass (Dirac delta
          surfaces) onto a diffuse surface seen by the camera, and connected
          to the camera there; combined with path tracing by multiple
          importance sampling, so the image stays unbiased and its caustics
@@ -194,7 +194,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         geometry = self.geometry(scene)
         tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check)
         return (tracer, "") if tracer.active else (
-            None, "no lathe with a Dirac-delta BSDF, or no area, point or spot light")
+            None, "no lathe with a Dirac-delta BSDF, or no area, point, spot or directional light")
 
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
                develop: bool = True, evaluate: bool = True) -> mi.TensorXf:

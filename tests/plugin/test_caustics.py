@@ -119,6 +119,41 @@ def test_point_light_caustic_matches_a_small_sphere_light():
     assert plain_point[region].mean() < 0.3 * traced_point[region].mean()
 
 
+def test_directional_light_caustic_matches_a_distant_small_light():
+    """A directional light's caustic (light-traced alone: path tracing
+    cannot hit it) against a small square light 40 units away along the
+    same direction with the same irradiance at the ball (light-traced and
+    path-traced, weighted by eq. 32)."""
+    direction = np.array([0.1, -0.4, -1.0])
+    direction /= np.linalg.norm(direction)
+    irradiance, distance, half = 5.0, 40.0, 0.25
+    centre = np.array([0.0, 0.0, 1.2]) - distance * direction
+    sun = {"type": "directional", "direction": direction.tolist(),
+           "irradiance": {"type": "rgb", "value": irradiance}}
+    lamp = {"type": "rectangle",
+            "to_world": mi.ScalarTransform4f().look_at(origin=centre.tolist(), target=[0.0, 0.0, 1.2],
+                                                       up=[0.0, 0.0, 1.0]).scale([half, half, 1.0]),
+            "emitter": {"type": "area",
+                        "radiance": {"type": "rgb", "value": irradiance * distance**2 / (2 * half) ** 2}}}
+    scenes = []
+    for light in (sun, lamp):
+        scene = ball_scene("point")
+        ball = {"type": "lathe", "profile": BALL, "mesh_segments": 128,
+                "bsdf": {"type": "dielectric", "int_ior": 1.33}}
+        floor = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1]), "bsdf": {"type": "diffuse"}}
+        scenes.append(mi.load_dict({"type": "scene", "sensor": scene.sensors()[0], "light": light, "ball": ball,
+                                    "floor": floor}))
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    traced_sun = luminance(render(scenes[0], 64, seed=1))
+    traced_lamp = luminance(render(scenes[1], 64, seed=2, caustic_paths=1.0))
+    plain_sun = luminance(render(scenes[0], 64, seed=3, caustics=False))
+    region = luminance(caustic_image(scenes[0], 64)) > 0.5 * traced_sun
+    assert region.sum() >= 20
+    assert traced_sun[region].mean() == pytest.approx(traced_lamp[region].mean(), rel=0.04)
+    assert plain_sun[region].mean() < 0.3 * traced_sun[region].mean()
+
+
 def test_film_holds_the_returned_image(area_scene):
     integrator = mi.load_dict({"type": "lathe_path", "aovs": "albedo"})
     image = np.array(mi.render(area_scene, integrator=integrator, spp=16))
@@ -187,7 +222,7 @@ def test_nothing_to_trace_leaves_path_tracing_bit_for_bit(area_scene, case):
     integrator = mi.load_dict({"type": "lathe_path"})
     tracer, why = integrator.caustic_setup(scene, scene.sensors()[0])
     assert tracer is None
-    assert why == ("no lathe with a Dirac-delta BSDF, or no area, point or spot light")
+    assert why == "no lathe with a Dirac-delta BSDF, or no area, point, spot or directional light"
     on = render(scene, 4, seed=2)
     off = render(scene, 4, seed=2, caustics=False)
     assert np.array_equal(on, off)
