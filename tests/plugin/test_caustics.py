@@ -140,9 +140,10 @@ def test_directional_light_caustic_matches_a_distant_small_light():
         scene = ball_scene("point")
         ball = {"type": "lathe", "profile": BALL, "mesh_segments": 128,
                 "bsdf": {"type": "dielectric", "int_ior": 1.33}}
-        floor = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1]), "bsdf": {"type": "diffuse"}}
-        scenes.append(mi.load_dict({"type": "scene", "sensor": scene.sensors()[0], "light": light, "ball": ball,
-                                    "floor": floor}))
+        floor = {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1]),
+                 "bsdf": {"type": "diffuse"}}
+        scenes.append(mi.load_dict({"type": "scene", "sensor": scene.sensors()[0], "light": light,
+                                    "ball": ball, "floor": floor}))
     from lathe_shape.validation.caustics_bench import caustic_image
 
     traced_sun = luminance(render(scenes[0], 64, seed=1))
