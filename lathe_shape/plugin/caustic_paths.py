@@ -122,7 +122,8 @@ def aim_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
     every cone)."""
     total = mi.Float(0.0)
     for centre, radius in spheres:
-        axis, cos_max = cone_cosine(mi.Point3f(centre), radius, p)
+        centre = centre if isinstance(centre, mi.Point3f) else mi.Point3f(centre)
+        axis, cos_max = cone_cosine(centre, radius, p)
         inside = dr.dot(axis, d) >= cos_max
         total += dr.select(inside, dr.rcp(dr.two_pi * (1.0 - cos_max)), 0.0)
     return total / len(spheres)
@@ -135,9 +136,9 @@ def disk_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
     disk facing ``d``)."""
     total = mi.Float(0.0)
     for centre, radius in spheres:
-        v = mi.Point3f(centre) - p
+        v = (centre if isinstance(centre, mi.Point3f) else mi.Point3f(centre)) - p
         across2 = dr.squared_norm(v) - dr.square(dr.dot(v, d))
-        total += dr.select(across2 <= radius * radius, 1.0 / (math.pi * radius * radius), 0.0)
+        total += dr.select(across2 <= radius * radius, dr.rcp(math.pi * radius * radius), 0.0)
     return total / len(spheres)
 
 
@@ -165,18 +166,24 @@ class PinholeCamera:
         ahead.p = ray.o + ray.d
         importance = sensor.sample_direction(ahead, mi.Point2f(0.5))[1]
         cos_centre = float(dr.dot(ray.d, mi.Vector3f(self.forward)).numpy()[0])
-        #: The film's area on the plane at unit distance (1 / importance there).
+        #: The film's (its crop window's) area on the plane at unit distance
+        #: (1 / importance there).
         self.film_area = 1.0 / (float(importance.x.numpy()[0]) * cos_centre**3)
+        # Opaque, so that a moved camera (a turntable's orbit) compiles no
+        # new kernel
+        self._origin = dr.opaque(mi.Point3f, self.origin)
+        self._forward = dr.opaque(mi.Vector3f, self.forward)
+        self._film_area = dr.opaque(mi.Float, self.film_area)
 
     def density(self, p: mi.Point3f, n: mi.Normal3f) -> mi.Float:
         """Eq. 32: the area density at ``p`` (normal ``n``) of a camera ray
         drawn uniformly over the whole film: 1 / (film area cos^3) per unit
         solid angle, times |cos| at ``p`` over the squared distance."""
-        to_p = p - mi.Point3f(self.origin)
+        to_p = p - self._origin
         dist2 = dr.squared_norm(to_p)
         d = to_p * dr.rsqrt(dist2)
-        cos_camera = dr.dot(d, mi.Vector3f(self.forward))
-        solid_angle = dr.rcp(self.film_area * dr.maximum(cos_camera, 1e-6) ** 3)
+        cos_camera = dr.dot(d, self._forward)
+        solid_angle = dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3)
         return dr.select(cos_camera > 0.0, solid_angle * dr.abs(dr.dot(n, d)) / dist2, 0.0)
 
 
@@ -206,6 +213,7 @@ class CausticTracer:
             if mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
             or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
             or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaDirection)
+            or mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite)
         ]
         #: How far back a directional light's particles start (beyond the scene).
         box = scene.bbox()
@@ -216,22 +224,44 @@ class CausticTracer:
                                 if not mi.has_flag(lathe.bsdf().flags(), mi.BSDFFlags.Smooth)]
         #: The spheres that particles aim at (eq. 33).
         self.spheres = aim_spheres(self.specular_lathes)
+        #: The scene's emitters (to tell them apart in :meth:`light_selection`).
+        self.emitters = list(emitters)
+        #: Probability of each light (slot of :attr:`light_indices`) to send
+        #: a particle: proportional to its power into the aiming cones (eq. 36).
+        self.selection = np.zeros(0, dtype=np.float32)
+        #: The same as opaque Dr.Jit values (a moved lathe compiles no new kernel).
+        self.opaque_spheres = [(dr.opaque(mi.Point3f, centre), dr.opaque(mi.Float, radius))
+                               for centre, radius in self.spheres]
         centres = [centre for centre, _ in self.spheres]
         self.sphere_centres = np.array(centres, dtype=np.float32).reshape(-1, 3)
         self.sphere_radii = np.array([radius for _, radius in self.spheres], dtype=np.float32)
+        if self.active:
+            power = self._light_powers(scene)
+            power = np.maximum(power, 1e-3 * power.max()) if power.max() > 0.0 else np.ones_like(power)
+            self.selection = (power / power.sum()).astype(np.float32)
+        self._selection = [dr.opaque(mi.Float, float(value)) for value in self.selection]
 
     @property
     def active(self) -> bool:
         """Whether there is anything to trace (lights and specular lathes)."""
         return bool(self.light_indices) and bool(self.specular_lathes) and self.max_chain >= 1
 
-    def light_density(self, p_area: mi.Float, cos_light: mi.Float, p: mi.Point3f,
+    def light_density(self, p_select: mi.Float, p_area: mi.Float, cos_light: mi.Float, p: mi.Point3f,
                       d: mi.Vector3f) -> mi.Float:
         """Eq. 32, light side: the density of a particle leaving an area
-        light at ``p`` (position density ``p_area``) in direction ``d``,
-        over ``cos_light``, with the light chosen uniformly."""
-        p_cone = aim_pdf(self.spheres, p, d)
-        return p_area * p_cone / (len(self.light_indices) * dr.maximum(dr.abs(cos_light), 1e-12))
+        light (chosen with probability ``p_select``) at ``p`` (position
+        density ``p_area``) in direction ``d``, over ``cos_light``."""
+        p_cone = aim_pdf(self.opaque_spheres, p, d)
+        return p_select * p_area * p_cone / dr.maximum(dr.abs(cos_light), 1e-12)
+
+    def environment_density(self, p_select: mi.Float, pdf_direction: mi.Float, p: mi.Point3f,
+                            d: mi.Vector3f) -> mi.Float:
+        """Eq. 35, light side: the density of an environment particle along
+        the line through ``p`` in direction ``d`` (towards the environment),
+        the environment's selection probability ``p_select`` and direction
+        density ``pdf_direction`` times the line's density across it
+        (eq. 34)."""
+        return p_select * pdf_direction * disk_pdf(self.opaque_spheres, p, d)
 
     # ------------------------------------------------------------------
     # The light pass
@@ -247,7 +277,10 @@ class CausticTracer:
         film = sensor.film()
         block = mi.ImageBlock(film.crop_size(), film.crop_offset(), 3, film.rfilter(),
                               border=False, normalize=True)
-        pixels = float(film.size().x * film.size().y)
+        # (the sensor's importance is normalised over the crop window, and its
+        # film positions are the crop's)
+        pixels = float(film.crop_size().x * film.crop_size().y)
+        offset = mi.Point2f(film.crop_offset())
         passes = max(1, math.ceil(count / PASS_SIZE))
         done = 0
         for index in range(passes):
@@ -261,26 +294,22 @@ class CausticTracer:
             # tests/plugin/test_caustics.py, but none reaches the film)
             splat &= dr.all(dr.isfinite(value))
             scale = dr.opaque(mi.Float, pixels / count)
-            block.put(pos, [value.x * scale, value.y * scale, value.z * scale], splat)
+            block.put(pos + offset, [value.x * scale, value.y * scale, value.z * scale], splat)
             dr.eval(block.tensor())
         return block.tensor()
 
-    @dr.syntax
-    def _trace(self, scene: mi.Scene, geometry, sensor: mi.Sensor, sampler: mi.Sampler, size: int,
-               per_camera_sample: float) -> tuple[mi.Point2f, mi.Spectrum, mi.Bool]:
-        """One wavefront of ``size`` particles: film positions, values (to
-        be scaled by pixels / particles) and which lanes splat (values
-        not checked for being finite)."""
-        check = self.normal_check
-        ctx = mi.BSDFContext(mi.TransportMode.Importance)
-        lights = len(self.light_indices)
-
-        # ---------------- Eq. 33: a particle aimed at the lathes ----------------
-        pick = dr.minimum(mi.UInt32(sampler.next_1d() * lights), lights - 1)
+    def _emit(self, scene: mi.Scene, sampler: mi.Sampler, size: int, pick: mi.UInt32,
+              per_camera_sample: mi.Float) -> tuple:
+        """``size`` particles leaving the lights of slots ``pick`` (in
+        :attr:`light_indices`) towards the aiming spheres: (origin as an
+        interaction to spawn from, direction, weight, the light side's
+        density of eq. 32, infinite where path tracing cannot hit the
+        light). The weight holds the selection probability of the light."""
+        p_select = dr.gather(mi.Float, mi.Float(self.selection), pick)
         index = dr.gather(mi.UInt32, mi.UInt32(self.light_indices), pick)
         emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), index)
         ps = emitter.sample_position(0.0, sampler.next_2d())[0]
-        spheres = self.spheres
+        spheres = self.opaque_spheres
         choice = dr.minimum(mi.UInt32(sampler.next_1d() * len(spheres)), len(spheres) - 1)
         centre = dr.gather(mi.Point3f, mi.Point3f(*self.sphere_centres.T), choice)
         radius = dr.gather(mi.Float, mi.Float(self.sphere_radii), choice)
@@ -301,10 +330,13 @@ class CausticTracer:
         it.p, it.time = ps.p + d, ps.time
         intensity = emitter.sample_direction(it, mi.Point2f(0.5), is_delta)[1]
         emitted = radiance * dr.maximum(cos_light, 0.0) / dr.maximum(ps.pdf, 1e-30)
-        beta = dr.select(is_delta, intensity, emitted) * (lights / p_cone)
+        beta = dr.select(is_delta, intensity, emitted) / p_cone
         # Eq. 32: the light side's density (infinite for a point light: path
         # tracing cannot hit it)
-        area_density = per_camera_sample * ps.pdf * p_cone / (lights * dr.maximum(cos_light, 1e-12))
+        # (the shape's position density, as path tracing reads it: a textured
+        # light samples its positions by radiance, which ps.pdf holds)
+        p_area = emitter.get_shape().pdf_position(ps, ~is_delta)
+        area_density = per_camera_sample * p_select * p_area * p_cone / dr.maximum(cos_light, 1e-12)
         light_density = dr.select(is_delta, dr.inf, area_density)
         # Directional light: a point on the disk of the chosen sphere facing
         # the light, the particle coming from far back through it (eq. 34)
@@ -315,13 +347,63 @@ class CausticTracer:
         disk = mi.warp.square_to_uniform_disk_concentric(sampler.next_2d()) * radius
         through = centre + mi.Frame3f(sun.d).to_world(mi.Vector3f(disk.x, disk.y, 0.0))
         p_disk = disk_pdf(spheres, through, sun.d)
-        d = dr.select(is_directional, -sun.d, d)
-        beta = dr.select(is_directional, irradiance * (lights / dr.maximum(p_disk, 1e-30)), beta)
+        # Environment: a direction drawn by the environment's own sampling,
+        # the particle coming from far back along it through the same kind
+        # of disk (eq. 35)
+        is_environment = mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite) & ~is_directional
+        sky, sky_weight = emitter.sample_direction(it_centre, sampler.next_2d(), is_environment)
+        through_sky = centre + mi.Frame3f(sky.d).to_world(mi.Vector3f(disk.x, disk.y, 0.0))
+        p_sky = disk_pdf(spheres, through_sky, sky.d)
+        sky_density = per_camera_sample * p_select * sky.pdf * p_sky
+        d = dr.select(is_directional, -sun.d, dr.select(is_environment, -sky.d, d))
+        beta = dr.select(is_directional, irradiance / dr.maximum(p_disk, 1e-30),
+                         dr.select(is_environment, sky_weight / dr.maximum(p_sky, 1e-30), beta))
+        beta = dr.select(p_select > 0.0, beta / p_select, 0.0)
+        light_density = dr.select(is_environment, sky_density, light_density)
         light_density = dr.select(is_directional, dr.inf, light_density)
         origin = dr.zeros(mi.SurfaceInteraction3f, size)
-        origin.p = dr.select(is_directional, through + sun.d * self.far, ps.p)
-        origin.n = dr.select(is_delta | is_directional, 0.0, ps.n)
+        far = dr.opaque(mi.Float, self.far)
+        origin.p = dr.select(is_directional, through + sun.d * far,
+                             dr.select(is_environment, through_sky + sky.d * far, ps.p))
+        origin.n = dr.select(is_delta | is_directional | is_environment, 0.0, ps.n)
         origin.time = ps.time
+        return origin, d, beta, light_density
+
+    def _light_powers(self, scene: mi.Scene, particles: int = 4096) -> np.ndarray:
+        """Eq. 36: each light's power into the aiming cones, estimated from
+        ``particles`` particles of its own (the mean of their first weight's
+        luminance; a fixed seed, so every render of the scene draws the
+        lights alike)."""
+        lights = len(self.light_indices)
+        self.selection = np.full(lights, 1.0, dtype=np.float32)  # (a weight of 1 in _emit)
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(dr.opaque(mi.UInt32, 12345), particles * lights)
+        pick = dr.arange(mi.UInt32, particles * lights) // particles
+        _, _, beta, _ = self._emit(scene, sampler, particles * lights, pick, mi.Float(1.0))
+        power = np.nan_to_num(np.array(mi.luminance(beta)), nan=0.0, posinf=0.0).reshape(lights, particles)
+        return np.maximum(power, 0.0).mean(axis=1)
+
+    def light_selection(self, emitter: mi.EmitterPtr) -> mi.Float:
+        """The probability with which :meth:`_trace` picks ``emitter``
+        (0 for lights that send no particles)."""
+        emitters = self.emitters
+        chosen = mi.Float(0.0)
+        for slot, index in enumerate(self.light_indices):
+            chosen = dr.select(emitter == mi.EmitterPtr(emitters[index]), self._selection[slot], chosen)
+        return chosen
+
+    @dr.syntax
+    def _trace(self, scene: mi.Scene, geometry, sensor: mi.Sensor, sampler: mi.Sampler, size: int,
+               per_camera_sample: float) -> tuple[mi.Point2f, mi.Spectrum, mi.Bool]:
+        """One wavefront of ``size`` particles: film positions, values (to
+        be scaled by pixels / particles) and which lanes splat (values
+        not checked for being finite)."""
+        check = self.normal_check
+        ctx = mi.BSDFContext(mi.TransportMode.Importance)
+
+        # ---------------- Eqs. 33-35: a particle aimed at the lathes ----------------
+        pick = mi.DiscreteDistribution(self.selection).sample(sampler.next_1d())
+        origin, d, beta, light_density = self._emit(scene, sampler, size, pick, per_camera_sample)
 
         ray = origin.spawn_ray(d)                 # Current ray of the particle
         walk = start_walk(size)                   # Its line and last lathe crossing
@@ -372,7 +454,11 @@ class CausticTracer:
                 reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
                 side = cos_in_geo * dr.dot(si.n, wo_world)
                 active &= ~dr.select(reflected, side <= 0.0, side >= 0.0)
-            beta[active] *= weight
+            # The adjoint BSDF with shading normals (Veach 1997, eq. 5.17):
+            # 1 where the geometric frame was used
+            correction = dr.abs(mi.Frame3f.cos_theta(si.wi) * dr.dot(si.n, wo_world)
+                                / dr.maximum(dr.abs(cos_in_geo * mi.Frame3f.cos_theta(bs.wo)), 1e-12))
+            beta[active] *= weight * correction
             ray = si.spawn_ray(wo_world)
             chain += 1
             active &= dr.max(beta) > 0.0

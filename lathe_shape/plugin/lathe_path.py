@@ -54,6 +54,10 @@ from .variants import register_jit_plugin
 __all__ = ["AOV_CHANNELS", "LathePathIntegrator", "NORMAL_CHECKS", "contradicts", "mis_weight", "parse_aovs",
            "register", "sample_with_fallback", "with_geometric_frame"]
 
+#: Why a render has no light-traced caustic paths though ``caustics`` is on.
+NOTHING_TO_TRACE = ("no lathe with a Dirac-delta BSDF, or no light (area, point, spot, directional, "
+                    "environment)")
+
 #: The guide images of the ``aovs`` parameter and their channel names.
 AOV_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "nn": ("nn.X", "nn.Y", "nn.Z")}
 
@@ -193,8 +197,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                                    self.caustic_max_chain)
         geometry = self.geometry(scene)
         tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check)
-        return (tracer, "") if tracer.active else (
-            None, "no lathe with a Dirac-delta BSDF, or no area, point, spot or directional light")
+        return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
 
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
                develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
@@ -212,7 +215,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         spp = spp or sensor_obj.sampler().sample_count()
         crop = film.crop_size()
         count = max(1, round(self.caustic_paths * spp * crop.x * crop.y))
-        per_camera_sample = count / (spp * film.size().x * film.size().y)
+        per_camera_sample = count / (spp * crop.x * crop.y)
         self._caustic_render = (tracer, dr.opaque(mi.Float, per_camera_sample))
         try:
             image = super().render(scene, sensor, seed, spp, develop, evaluate)
@@ -285,11 +288,21 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
             if dr.hint(caustics is not None, mode="scalar"):
-                # Eq. 32: a caustic path that the light tracer samples too
-                both = (active & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
-                        & mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Surface))
-                light_density = per_camera_sample * tracer.light_density(
-                    si.shape.pdf_position(ds, both), dr.dot(si.n, ray.d), si.p, -ray.d)
+                # Eq. 32: a caustic path that the light tracer samples too,
+                # ending on an area light or the environment (eq. 35)
+                caustic = active & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
+                flags = ds.emitter.flags()
+                surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
+                environment = (caustic & ~valid & mi.has_flag(flags, mi.EmitterFlags.Infinite)
+                               & ~mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
+                p_select = tracer.light_selection(ds.emitter)
+                density_surface = tracer.light_density(
+                    p_select, si.shape.pdf_position(ds, surface), dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
+                density_environment = tracer.environment_density(
+                    p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
+                light_density = dr.select(environment, density_environment, density_surface)
+                light_density *= per_camera_sample
+                both = surface | environment
                 weight = caustic_weight(caustic_density, light_density)
                 mis_bsdf = dr.select(both, mis_bsdf * weight, mis_bsdf)
             emitted = ds.emitter.eval(si, active)
@@ -366,7 +379,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 # with a smooth lobe; the chain after it only Dirac deltas
                 first = depth == 0
                 at_d = (first & active_next & ~bad_in & ~pure_delta(bsdf) & ~on_lathe(tracer.lathes, si)
-                        & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0))
+                        & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0)
+                        & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
                 density_d = (tracer.camera.density(si.p, si.n) * bs.pdf
                              / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
                 caustic_density = dr.select(at_d, density_d, caustic_density)
@@ -409,18 +423,31 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
 
 def add_to_film(film: mi.Film, image: mi.TensorXf, caustic: mi.TensorXf) -> mi.TensorXf:
     """``image`` (developed, channels as ``film.bitmap()`` names them) with
-    ``caustic`` (H, W, 3) added to its RGB channels; the film then holds
+    ``caustic`` (H, W, 3) added to its RGB channels (its luminance to the Y
+    channel of a luminance film); the film then holds
     the sum, so that ``film.develop()``, ``film.bitmap()`` and ``film.write()``
     give it too (its weights become 1)."""
     total = np.array(image, dtype=np.float32)
-    total[:, :, :3] += np.asarray(caustic, dtype=np.float32)
+    caustic = np.asarray(caustic, dtype=np.float32)
     raw = film.bitmap(raw=True)
     raw_names = [raw.struct_()[index].name for index in range(raw.channel_count())]
     developed = film.bitmap()
     names = [developed.struct_()[index].name for index in range(developed.channel_count())]
+    if names[:3] == ["R", "G", "B"]:
+        total[:, :, :3] += caustic
+    else:  # a luminance film (Y, YA): the caustic's luminance (Rec. 709)
+        total[:, :, 0] += caustic @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
     ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
-    storage = np.concatenate([ones if name == "W" else total[:, :, names.index(name)][:, :, None]
-                              for name in raw_names], axis=2)
+
+    def stored(name: str) -> np.ndarray:
+        # (a luminance film stores RGB and develops their luminance: a grey
+        # of the developed Y develops to that Y)
+        if name == "W":
+            return ones
+        channel = names.index(name if name in names else "Y")
+        return total[:, :, channel][:, :, None]
+
+    storage = np.concatenate([stored(name) for name in raw_names], axis=2)
     film.prepare(raw_names[raw_names.index("W") + 1:])
     film.put_block(mi.ImageBlock(mi.TensorXf(storage), film.crop_offset()))
     return mi.TensorXf(total)

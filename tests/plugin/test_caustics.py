@@ -14,12 +14,13 @@ BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0
 
 
 def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
-               crop: tuple | None = None) -> mi.Scene:
+               crop: tuple | None = None, pixel_format: str = "rgb") -> mi.Scene:
     """A glass ball (a lathe, radius 1, resting 0.2 above a white floor)
-    lit from above by a small square area light, a point light or a small
-    sphere light (``light``) of about the same intensity, seen from the side
+    lit from above by a small square area light (plain or ``textured``), a
+    point light or a small sphere light (``light``), seen from the side
     so that the caustic under the ball is on the film."""
-    film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}
+    film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"},
+            "pixel_format": pixel_format}
     if crop:
         film.update(crop_offset_x=crop[0], crop_offset_y=crop[1], crop_width=crop[2], crop_height=crop[3])
     scene = {
@@ -35,11 +36,17 @@ def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}},
     }
     # Intensity 40 straight down in each case
-    if light == "area":
+    if light in ("area", "textured"):
         place = mi.ScalarTransform4f().translate([0.3, 3.0, light_z]).scale([0.25, 0.25, 1])
         tilt = mi.ScalarTransform4f().rotate([1, 0, 0], 145)
+        radiance = {"type": "rgb", "value": [160.0] * 3}
+        if light == "textured":  # 4x wider, a ramp from 0.2 to 20, sampled by radiance
+            place = place @ mi.ScalarTransform4f().scale([4.0, 4.0, 1.0])
+            ramp = np.geomspace(0.2, 20.0, 64, dtype=np.float32).reshape(8, 8, 1)
+            ramp = ramp * np.ones(3, dtype=np.float32)
+            radiance = {"type": "bitmap", "bitmap": mi.Bitmap(ramp), "raw": True}
         scene["light"] = {"type": "rectangle", "to_world": place @ tilt,
-                          "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [160.0] * 3}}}
+                          "emitter": {"type": "area", "radiance": radiance}}
     elif light == "point":
         scene["light"] = {"type": "point", "position": [0.3, 3.0, light_z],
                           "intensity": {"type": "rgb", "value": [40.0] * 3}}
@@ -100,6 +107,25 @@ def test_weights_of_the_two_techniques_sum_to_one(area_scene, caustic_region):
     many = luminance(render(area_scene, 64, seed=5, caustic_paths=16.0))
     assert many[caustic_region].mean() == pytest.approx(few[caustic_region].mean(), rel=0.03)
     assert many.mean() == pytest.approx(few.mean(), rel=0.01)
+
+
+def test_weights_sum_to_one_with_a_textured_light():
+    """A bitmap-textured area light samples its points by radiance: the
+    weights must still read the shape's position density on both sides
+    (eq. 32), or the two techniques' images differ."""
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    scene = ball_scene("textured")
+    region = luminance(caustic_image(scene, 256)) > 0.2 * luminance(render(scene, 128, seed=9))
+    assert region.sum() >= 20
+    # Weights that do not sum to one show where both techniques count:
+    # with few particles (the default 0.05 per camera sample), not where the
+    # light tracer takes nearly all (16). The light's position densities
+    # differ by up to 2.5x; reading the sampled one on the light tracer's
+    # side made this image 1.3-2% darker.
+    balanced = np.mean([luminance(render(scene, 512, seed=s, caustic_paths=0.05)) for s in range(2)], axis=0)
+    many = np.mean([luminance(render(scene, 128, seed=50 + s, caustic_paths=16.0)) for s in range(2)], axis=0)
+    assert balanced[region].mean() == pytest.approx(many[region].mean(), rel=0.01)
 
 
 def test_point_light_caustic_matches_a_small_sphere_light():
@@ -163,14 +189,39 @@ def test_film_holds_the_returned_image(area_scene):
     assert np.array_equal(image, film)
 
 
+def test_luminance_film_gets_the_caustic_luminance():
+    """A film of pixel format ``luminance`` gets the luminance of the caustic
+    (an RGB film's caustic, weighted as Mitsuba weighs RGB to Y)."""
+    rgb, luma = ball_scene("point"), ball_scene("point", pixel_format="luminance")
+    image_rgb = render(rgb, 64, seed=1)
+    image_luma = render(luma, 64, seed=1)
+    assert image_luma.shape == (48, 48, 1)
+    expected = image_rgb[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    assert image_luma[..., 0].mean() == pytest.approx(expected.mean(), rel=0.02)
+    film = np.array(luma.sensors()[0].film().bitmap())
+    np.testing.assert_allclose(film.reshape(image_luma.shape), image_luma, rtol=1e-5, atol=1e-7)
+
+
 def test_crop_window_gets_the_same_caustic():
     """The caustic splats land on the cropped film where they land on the
-    full one (the film's crop offset)."""
-    full = luminance(render(ball_scene("point"), 64, seed=4))
-    crop = luminance(render(ball_scene("point", crop=(8, 12, 16, 14)), 64, seed=5))
-    assert crop.shape == (14, 16)
-    window = full[12:26, 8:24]
-    assert crop.mean() == pytest.approx(window.mean(), rel=0.03)
+    full one, as bright (the sensor's importance and film positions are the
+    crop window's)."""
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    window = (16, 24, 24, 20)  # x, y, width, height: over the point light's caustic
+    full, cropped = ball_scene("point"), ball_scene("point", crop=window)
+    rows, cols = slice(window[1], window[1] + window[3]), slice(window[0], window[0] + window[2])
+    caustic_full = luminance(caustic_image(full, 256))[rows, cols]
+    caustic_crop = luminance(caustic_image(cropped, 256 * 48 * 48 // (24 * 20)))
+    assert caustic_crop.shape == (20, 24)
+    assert caustic_full.sum() > 10.0  # the caustic is in the window
+    assert caustic_crop.sum() == pytest.approx(caustic_full.sum(), rel=0.02)
+    assert np.abs(caustic_crop - caustic_full).sum() < 0.1 * caustic_full.sum()
+    # (a crop window gets particles for its own pixels, most of which land
+    # outside it: its caustic is noisier than the full film's)
+    image_full = luminance(render(full, 256, seed=4))[rows, cols]
+    image_crop = luminance(render(cropped, 256, seed=5))
+    assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
 @pytest.mark.parametrize("light_z", [1.25, 2.5])
@@ -207,23 +258,24 @@ def test_parameter_errors(params, message):
     assert message in str(error.value)
 
 
-@pytest.mark.parametrize("case", ["sky only", "diffuse lathe"])
+@pytest.mark.parametrize("case", ["no light", "diffuse lathe"])
 def test_nothing_to_trace_leaves_path_tracing_bit_for_bit(area_scene, case):
-    """Without a light to send particles (a sky only), or without a lathe
-    whose BSDF is a Dirac delta (a diffuse vase under an area light), the
-    caustic pass is skipped and the render is plain lathe_path's, bit for
-    bit."""
+    """Without a light to send particles, or without a lathe whose BSDF is a
+    Dirac delta (a diffuse vase under a sky and a point light), the caustic
+    pass is skipped and the render is plain lathe_path's, bit for bit."""
     scene = {"type": "scene", "sensor": area_scene.sensors()[0],
              "ball": {"type": "lathe", "profile": BALL, "bsdf": {"type": "dielectric"}},
-             "sky": {"type": "constant"}}
+             "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1])}}
     if case == "diffuse lathe":
+        scene["sky"] = {"type": "constant"}
         scene["ball"]["bsdf"] = {"type": "diffuse"}
         scene["light"] = {"type": "point", "position": [0.3, 3.0, 5.0]}
     scene = mi.load_dict(scene)
     integrator = mi.load_dict({"type": "lathe_path"})
     tracer, why = integrator.caustic_setup(scene, scene.sensors()[0])
     assert tracer is None
-    assert why == "no lathe with a Dirac-delta BSDF, or no area, point, spot or directional light"
+    assert why == ("no lathe with a Dirac-delta BSDF, or no light (area, point, spot, directional, "
+                   "environment)")
     on = render(scene, 4, seed=2)
     off = render(scene, 4, seed=2, caustics=False)
     assert np.array_equal(on, off)
