@@ -160,12 +160,14 @@ class PinholeCamera:
         forward = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
         self.origin = [float(v) for v in matrix[:3, 3]]
         self.forward = [float(v) for v in forward]
-        # The importance along the ray through the film's centre
+        # The importance along the ray through the film's centre (the
+        # arithmetic in NumPy: no kernel with this camera's numbers in it)
         ray = sensor.sample_ray(0.0, 0.5, mi.Point2f(0.5), mi.Point2f(0.5))[0]
+        origin, direction = np.array(ray.o).ravel(), np.array(ray.d).ravel()
         ahead = dr.zeros(mi.Interaction3f, 1)
-        ahead.p = ray.o + ray.d
+        ahead.p = dr.opaque(mi.Point3f, [float(v) for v in origin + direction])
         importance = sensor.sample_direction(ahead, mi.Point2f(0.5))[1]
-        cos_centre = float(dr.dot(ray.d, mi.Vector3f(self.forward)).numpy()[0])
+        cos_centre = float(np.dot(direction, forward))
         #: The film's (its crop window's) area on the plane at unit distance
         #: (1 / importance there).
         self.film_area = 1.0 / (float(importance.x.numpy()[0]) * cos_centre**3)
