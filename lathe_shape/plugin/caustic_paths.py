@@ -16,7 +16,8 @@ importance sampling (the power heuristic) and nothing is counted twice:
   lathe nor a pure Dirac delta and sampled with its smooth lobes; ``S_1 ...
   S_k`` (``1 <= k <= max_chain``) surfaces whose BSDF is pure Dirac
   delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``); and the
-  light an area emitter, a point, spot or directional light.
+  light an area emitter, a point, spot or directional light or the
+  environment.
 * Every other path is path traced alone, as before.
 * On a caustic path, the two techniques' densities share the chain's
   generalized geometry term, which cancels in their ratio: eq. 32 of
@@ -32,11 +33,12 @@ stays unbiased for any spheres.
 
 A directional light's particles come from far back through a point drawn
 uniformly on the disk of one of those spheres that faces the light (eq. 34);
-path tracing cannot hit a directional light either.
+path tracing cannot hit a directional light either. An environment's come
+the same way along a direction of its own sampling (eq. 35). Each light
+sends particles in proportion to its power into the cones (eq. 36).
 
 Limits (each falls back to path tracing alone, unbiased): RGB variants,
-a ``perspective`` sensor, not with ``hide_emitters``; environment lights
-send no particles.
+a pinhole ``perspective`` sensor, not with ``hide_emitters``.
 """
 
 from __future__ import annotations

@@ -123,7 +123,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
      * - caustics
        - |bool|
        - Also trace caustic paths from the lights: particles sent from area,
-         point, spot and directional lights towards the lathes, through glass (Dirac delta
+         point, spot and directional lights and the environment towards the
+         lathes, through glass (Dirac delta
          surfaces) onto a diffuse surface seen by the camera, and connected
          to the camera there; combined with path tracing by multiple
          importance sampling, so the image stays unbiased and its caustics

@@ -181,6 +181,29 @@ def test_directional_light_caustic_matches_a_distant_small_light():
     assert plain_sun[region].mean() < 0.3 * traced_sun[region].mean()
 
 
+def test_environment_caustic_agrees_with_plain_path_tracing():
+    """An environment map with a small bright sun: its caustic under the
+    ball, light-traced along the map's own sampled directions (eq. 35) and
+    weighted against path tracing, which reaches the map too, matches plain
+    path tracing; the weights sum to one (few particles against many)."""
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    sky = np.full((16, 32, 3), 0.05, dtype=np.float32)
+    sky[2:4, 14:16] = 400.0  # a sun high up behind the ball
+    scene = ball_scene("point")
+    scene = mi.load_dict({"type": "scene", "sensor": scene.sensors()[0],
+                          "sky": {"type": "envmap", "bitmap": mi.Bitmap(sky)},
+                          **{shape.id(): shape for shape in scene.shapes()}})
+    region = luminance(caustic_image(scene, 256)) > 0.2 * luminance(render(scene, 64, seed=9))
+    assert region.sum() >= 20
+    plain = np.mean([luminance(render(scene, 1024, seed=s, caustics=False)) for s in range(2)], axis=0)
+    balanced = np.mean([luminance(render(scene, 256, seed=10 + s)) for s in range(2)], axis=0)
+    many = luminance(render(scene, 64, seed=20, caustic_paths=16.0))
+    assert balanced[region].mean() == pytest.approx(plain[region].mean(), rel=0.03)
+    assert many[region].mean() == pytest.approx(balanced[region].mean(), rel=0.02)
+    assert many.mean() == pytest.approx(plain.mean(), rel=0.01)
+
+
 def test_film_holds_the_returned_image(area_scene):
     integrator = mi.load_dict({"type": "lathe_path", "aovs": "albedo"})
     image = np.array(mi.render(area_scene, integrator=integrator, spp=16))
