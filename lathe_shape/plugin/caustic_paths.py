@@ -33,9 +33,11 @@ stays unbiased for any spheres.
 
 A directional light's particles come from far back through a point drawn
 uniformly on the disk of one of those spheres that faces the light (eq. 34);
-path tracing cannot hit a directional light either. An environment's come
-the same way along a direction of its own sampling (eq. 35). Each light
-sends particles in proportion to its power into the cones (eq. 36).
+path tracing cannot hit a directional light either. An environment map's
+come the same way along a direction of its own sampling (eq. 35); a uniform
+``constant`` sky sends none (path tracing meets it in every direction).
+Each light sends particles in proportion to its power into the cones
+(eq. 36).
 
 Limits (each falls back to path tracing alone, unbiased): RGB variants,
 a pinhole ``perspective`` sensor, not with ``hide_emitters``.
@@ -212,12 +214,15 @@ class CausticTracer:
         self.normal_check = normal_check
         emitters = scene.emitters()
         #: Indices (in ``scene.emitters()``) of the lights that send particles.
+        #: (A uniform sky sends none: path tracing meets it in every
+        #: direction, and its particles would only take others' share.)
         self.light_indices = [
             index for index, emitter in enumerate(emitters)
             if mi.has_flag(emitter.flags(), mi.EmitterFlags.Surface)
             or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaPosition)
             or mi.has_flag(emitter.flags(), mi.EmitterFlags.DeltaDirection)
-            or mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite)
+            or (mi.has_flag(emitter.flags(), mi.EmitterFlags.Infinite)
+                and emitter.class_name() != "ConstantBackgroundEmitter")
         ]
         #: How far back a directional light's particles start (beyond the scene).
         box = scene.bbox()
