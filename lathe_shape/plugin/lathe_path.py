@@ -418,7 +418,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         return (
             f"LathePathIntegrator[max_depth={depth}, rr_depth={self.rr_depth}, "
             f"hide_emitters={self.hide_emitters}, normal_check='{self.normal_check}', "
-            f"aovs='{','.join(self.aovs)}']"
+            f"aovs='{','.join(self.aovs)}', caustics={self.caustics}, caustic_paths={self.caustic_paths}, "
+            f"caustic_max_chain={self.caustic_max_chain}]"
         )
 
 
