@@ -1,4 +1,4 @@
-"""``lathe_path``'s light-traced caustics (``caustics``, eqs. 32-33):
+"""``lathe_path``'s light-traced caustics (``caustics``, eqs. 32-36):
 unbiased against plain path tracing, the two techniques' weights summing to
 one, point-light caustics that path tracing cannot find, the film holding
 what the render returns, a crop window, no NaN or Inf at grazing angles and
