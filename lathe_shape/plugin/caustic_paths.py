@@ -67,6 +67,14 @@ PASS_SIZE = 1 << 22
 MAX_SPHERES = 16
 
 
+def jit_array(kind: type, values) -> object:
+    """A Dr.Jit array of ``kind`` holding ``values``, copied from a Python
+    list: an array made from a NumPy buffer may keep its alignment, which
+    Dr.Jit writes into the kernel (a new kernel hash, a recompilation, from
+    one render to the next)."""
+    return kind([value.item() if hasattr(value, "item") else value for value in values])
+
+
 def pure_delta(bsdf: mi.BSDFPtr) -> mi.Bool:
     """Whether ``bsdf`` has Dirac delta lobes only (a chain vertex)."""
     return ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -314,14 +322,15 @@ class CausticTracer:
         interaction to spawn from, direction, weight, the light side's
         density of eq. 32, infinite where path tracing cannot hit the
         light). The weight holds the selection probability of the light."""
-        p_select = dr.gather(mi.Float, mi.Float(self.selection), pick)
-        index = dr.gather(mi.UInt32, mi.UInt32(self.light_indices), pick)
+        p_select = dr.gather(mi.Float, jit_array(mi.Float, self.selection), pick)
+        index = dr.gather(mi.UInt32, jit_array(mi.UInt32, self.light_indices), pick)
         emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), index)
         ps = emitter.sample_position(0.0, sampler.next_2d())[0]
         spheres = self.opaque_spheres
         choice = dr.minimum(mi.UInt32(sampler.next_1d() * len(spheres)), len(spheres) - 1)
-        centre = dr.gather(mi.Point3f, mi.Point3f(*self.sphere_centres.T), choice)
-        radius = dr.gather(mi.Float, mi.Float(self.sphere_radii), choice)
+        centres = mi.Point3f(*(jit_array(mi.Float, axis) for axis in self.sphere_centres.T))
+        centre = dr.gather(mi.Point3f, centres, choice)
+        radius = dr.gather(mi.Float, jit_array(mi.Float, self.sphere_radii), choice)
         axis, cos_max = cone_cosine(centre, radius, ps.p)
         local = mi.warp.square_to_uniform_cone(sampler.next_2d(), cos_max)
         d = mi.Frame3f(axis).to_world(local)
@@ -411,7 +420,7 @@ class CausticTracer:
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
 
         # ---------------- Eqs. 33-35: a particle aimed at the lathes ----------------
-        pick = mi.DiscreteDistribution(self.selection).sample(sampler.next_1d())
+        pick = mi.DiscreteDistribution(jit_array(mi.Float, self.selection)).sample(sampler.next_1d())
         origin, d, beta, light_density = self._emit(scene, sampler, size, pick, per_camera_sample)
 
         ray = origin.spawn_ray(d)                 # Current ray of the particle
