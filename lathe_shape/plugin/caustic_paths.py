@@ -51,7 +51,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .integrator_base import sample_with_fallback, with_geometric_frame
+from .integrator_base import contradicts, sample_with_fallback, with_geometric_frame
 from .line_walk import start_walk
 
 __all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe", "pure_delta"]
@@ -107,7 +107,7 @@ def aim_spheres(lathes: list) -> list[tuple[tuple[float, float, float], float]]:
         for index in range(count):
             z = z_low + (2 * index + 1) * half
             centre = matrix @ np.array([0.0, 0.0, z, 1.0])
-            reach = scale * math.hypot(radius, half) * SPHERE_MARGIN
+            reach = scale * math.hypot(radius, half)  # (radius holds the margin)
             spheres.append((tuple(float(c) for c in centre[:3]), reach))
     if len(spheres) > MAX_SPHERES:
         low = np.min([np.array(c) - r for c, r in spheres], axis=0)
@@ -152,6 +152,24 @@ def disk_pdf(spheres: list, p: mi.Point3f, d: mi.Vector3f) -> mi.Float:
         across2 = dr.squared_norm(v) - dr.square(dr.dot(v, d))
         total += dr.select(across2 <= radius * radius, dr.rcp(math.pi * radius * radius), 0.0)
     return total / len(spheres)
+
+
+def adjoint_correction(cos_in_shading: mi.Float, cos_in_geometric: mi.Float, cos_out_shading: mi.Float,
+                       cos_out_geometric: mi.Float) -> mi.Float:
+    """The factor that turns a BSDF evaluated with shading normals into its
+    adjoint, for light carried from the incident to the outgoing direction
+    (Veach 1997, eq. 5.17): |wi.Ns| |wo.Ng| / (|wi.Ng| |wo.Ns|); 1 where the
+    shading normal is the geometric one."""
+    return dr.abs(cos_in_shading * cos_out_geometric
+                  / dr.maximum(dr.abs(cos_in_geometric * cos_out_shading), 1e-12))
+
+
+def area_light_density(p_select: mi.Float, p_area: mi.Float, p_direction: mi.Float,
+                       cos_light: mi.Float) -> mi.Float:
+    """Eq. 32, light side, for an area light chosen with probability
+    ``p_select``: position density ``p_area`` times direction density
+    ``p_direction`` (eq. 33), over the cosine at the light."""
+    return p_select * p_area * p_direction / dr.maximum(dr.abs(cos_light), 1e-12)
 
 
 def caustic_weight(own: mi.Float, other: mi.Float) -> mi.Float:
@@ -268,8 +286,7 @@ class CausticTracer:
         """Eq. 32, light side: the density of a particle leaving an area
         light (chosen with probability ``p_select``) at ``p`` (position
         density ``p_area``) in direction ``d``, over ``cos_light``."""
-        p_cone = aim_pdf(self.opaque_spheres, p, d)
-        return p_select * p_area * p_cone / dr.maximum(dr.abs(cos_light), 1e-12)
+        return area_light_density(p_select, p_area, aim_pdf(self.opaque_spheres, p, d), cos_light)
 
     def environment_density(self, p_select: mi.Float, pdf_direction: mi.Float, p: mi.Point3f,
                             d: mi.Vector3f) -> mi.Float:
@@ -354,7 +371,7 @@ class CausticTracer:
         # (the shape's position density, as path tracing reads it: a textured
         # light samples its positions by radiance, which ps.pdf holds)
         p_area = emitter.get_shape().pdf_position(ps, ~is_delta)
-        area_density = per_camera_sample * p_select * p_area * p_cone / dr.maximum(cos_light, 1e-12)
+        area_density = per_camera_sample * area_light_density(p_select, p_area, p_cone, cos_light)
         light_density = dr.select(is_delta, dr.inf, area_density)
         # Directional light: a point on the disk of the chosen sphere facing
         # the light, the particle coming from far back through it (eq. 34)
@@ -469,13 +486,10 @@ class CausticTracer:
                 bsdf, ctx, si, si.wi, (sample_1, sample_2), redraws, cos_in_geo,
                 active & (check == "fallback"), active, geo_frame)[2:]
             if dr.hint(check == "terminate", mode="scalar"):
-                reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Reflection)
-                side = cos_in_geo * dr.dot(si.n, wo_world)
-                active &= ~dr.select(reflected, side <= 0.0, side >= 0.0)
-            # The adjoint BSDF with shading normals (Veach 1997, eq. 5.17):
-            # 1 where the geometric frame was used
-            correction = dr.abs(mi.Frame3f.cos_theta(si.wi) * dr.dot(si.n, wo_world)
-                                / dr.maximum(dr.abs(cos_in_geo * mi.Frame3f.cos_theta(bs.wo)), 1e-12))
+                active &= ~contradicts(si, cos_in_geo, bs, wo_world)
+            # (1 where the geometric frame was used)
+            correction = adjoint_correction(mi.Frame3f.cos_theta(si.wi), cos_in_geo,
+                                            mi.Frame3f.cos_theta(bs.wo), dr.dot(si.n, wo_world))
             beta[active] *= weight * correction
             ray = si.spawn_ray(wo_world)
             chain += 1
@@ -493,8 +507,8 @@ class CausticTracer:
         bsdf_d = si_d.bsdf()
         value = bsdf_d.eval(ctx, si_d, wo_local, splat)
         # The adjoint BSDF with shading normals (Veach 1997, eq. 5.17)
-        correction = dr.abs(mi.Frame3f.cos_theta(si_d.wi) * wo_geo
-                            / dr.maximum(dr.abs(wi_geo * mi.Frame3f.cos_theta(wo_local)), 1e-12))
+        correction = adjoint_correction(mi.Frame3f.cos_theta(si_d.wi), wi_geo,
+                                        mi.Frame3f.cos_theta(wo_local), wo_geo)
         # Eq. 32: path tracing's density of this path at D (its camera ray,
         # then the BSDF sample from the camera's side towards the glass)
         si_cam = mi.SurfaceInteraction3f(si_d)

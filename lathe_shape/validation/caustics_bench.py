@@ -74,18 +74,9 @@ def load(name: str, root: str, resolution: int) -> mi.Scene:
 
 def glass_mask(scene: mi.Scene) -> np.ndarray:
     """(H, W) bool: pixels whose centre ray first meets an exact lathe."""
-    from ..plugin.caustic_paths import on_lathe
-    from ..plugin.scene_geometry import ExactSceneGeometry
+    from .furnace import first_hit_mask
 
-    sensor = scene.sensors()[0]
-    width, height = (int(v) for v in sensor.film().size())
-    index = dr.arange(mi.UInt32, width * height)
-    pixel = mi.Point2f(mi.Float(index % width) + 0.5, mi.Float(index // width) + 0.5)
-    ray, _ = sensor.sample_ray(0.0, 0.5, pixel / mi.ScalarPoint2f(width, height), mi.Point2f(0.5))
-    geometry = ExactSceneGeometry(scene)
-    si = geometry.ray_intersect(mi.Ray3f(ray), mi.Bool(True))
-    hit = si.is_valid() & on_lathe(geometry.lathes, si)
-    return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
+    return first_hit_mask(scene)
 
 
 def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:

@@ -16,7 +16,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["FURNACE_PROFILE", "FurnaceResult", "furnace_scene", "furnace_table", "glass_mask", "run_furnace"]
+__all__ = ["FURNACE_PROFILE", "FurnaceResult", "first_hit_mask", "furnace_scene", "furnace_table",
+           "glass_mask", "run_furnace"]
 
 #: A thick-walled glass with a rounded rim (closed profile, both ends on axis).
 FURNACE_PROFILE = (
@@ -80,6 +81,25 @@ def glass_mask(scene: mi.Scene) -> np.ndarray:
     for lathe in scene_lathes(scene):
         hit |= lathe.ray_intersect_exact(ray).is_valid()
     return hit.numpy().reshape(height, width)
+
+
+def first_hit_mask(scene: mi.Scene, sensor: mi.Sensor | None = None,
+                   lathes: list | None = None) -> np.ndarray:
+    """(H, W) bool: the pixels of ``sensor`` (the scene's first) whose centre
+    ray meets one of ``lathes`` (every exact lathe) before anything else,
+    the lathes intersected exactly."""
+    from ..plugin.caustic_paths import on_lathe
+    from ..plugin.scene_geometry import ExactSceneGeometry
+
+    sensor = sensor or scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().size())
+    index = dr.arange(mi.UInt32, width * height)
+    pixel = mi.Point2f(mi.Float(index % width) + 0.5, mi.Float(index // width) + 0.5)
+    ray, _ = sensor.sample_ray(0.0, 0.5, pixel / mi.ScalarPoint2f(width, height), mi.Point2f(0.5))
+    geometry = ExactSceneGeometry(scene)
+    si = geometry.ray_intersect(mi.Ray3f(ray), mi.Bool(True))
+    hit = si.is_valid() & on_lathe(geometry.lathes if lathes is None else lathes, si)
+    return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
 
 
 def run_furnace(scene: mi.Scene, spp: int = 64, seed: int = 0,

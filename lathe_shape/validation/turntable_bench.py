@@ -31,15 +31,9 @@ __all__ = [
 def lathe_mask(turntable: Turntable) -> np.ndarray:
     """(H, W) bool: the pixels whose centre ray hits the turntable's lathe
     (exactly) before anything else."""
-    from ..plugin.scene_geometry import ExactSceneGeometry
+    from .furnace import first_hit_mask
 
-    width, height = (int(v) for v in turntable.sensor.film().size())
-    index = dr.arange(mi.UInt32, width * height)
-    pixel = mi.Point2f(mi.Float(index % width) + 0.5, mi.Float(index // width) + 0.5)
-    ray, _ = turntable.sensor.sample_ray(0.0, 0.5, pixel / mi.ScalarPoint2f(width, height), mi.Point2f(0.5))
-    si = ExactSceneGeometry(turntable.scene).ray_intersect(mi.Ray3f(ray), mi.Bool(True))
-    hit = si.is_valid() & (si.shape == mi.ShapePtr(turntable.lathe))
-    return np.asarray(hit.numpy(), dtype=bool).reshape(height, width)
+    return first_hit_mask(turntable.scene, turntable.sensor, [turntable.lathe])
 
 
 def frame_times(scene_path: str, variant: str, frames: int, spp: int, resolution: int,
