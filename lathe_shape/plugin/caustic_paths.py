@@ -51,10 +51,12 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .camera_chain import solve_camera_chain
 from .integrator_base import contradicts, sample_with_fallback, with_geometric_frame
 from .line_walk import start_walk
 
-__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe", "pure_delta"]
+__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe",
+           "pure_delta"]
 
 #: Margin of the aiming spheres over the lathes' tessellated profiles (a
 #: B-spline's curve may bulge past its points between them).
@@ -65,6 +67,7 @@ PASS_SIZE = 1 << 22
 
 #: Most spheres the particles aim at (beyond: one around every lathe).
 MAX_SPHERES = 16
+
 
 
 def jit_array(kind: type, values) -> object:
@@ -218,6 +221,12 @@ class PinholeCamera:
         solid_angle = dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3)
         return dr.select(cos_camera > 0.0, solid_angle * dr.abs(dr.dot(n, d)) / dist2, 0.0)
 
+    def direction_density(self, d: mi.Vector3f) -> mi.Float:
+        """Eq. 40: the solid-angle density of the camera ray direction
+        ``d`` (unit) drawn uniformly over the whole film."""
+        cos_camera = dr.dot(d, self._forward)
+        return dr.select(cos_camera > 0.0, dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3), 0.0)
+
 
 def chain_length_limit(max_depth: int, max_chain: int) -> int:
     """The longest specular chain in the caustic class: a path of ``k``
@@ -232,11 +241,20 @@ class CausticTracer:
     traces them (:meth:`render`). Made by the integrator each render."""
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, lathes: list, max_chain: int,
-                 normal_check: str) -> None:
+                 normal_check: str, max_vertices: int | None = None, chain_share: float = 0.3) -> None:
         self.lathes = lathes
         #: The sensor's pinhole camera (eq. 32).
         self.camera = PinholeCamera(sensor)
+        #: Most Dirac-delta vertices between D and the light, and between
+        #: the camera and D (eq. 40).
         self.max_chain = max_chain
+        #: Most Dirac-delta vertices on both sides of D together (the path
+        #: tracer's max_depth - 2).
+        self.max_vertices = max_chain if max_vertices is None else max(max_vertices, max_chain)
+        #: Share of the particles landing where the camera sees them only
+        #: through Dirac deltas that solve for the chain to the camera
+        #: (eqs. 39-40; ``caustic_camera_chains``).
+        self.chain_share = float(chain_share)
         self.normal_check = normal_check
         emitters = scene.emitters()
         #: Indices (in ``scene.emitters()``) of the lights that send particles.
@@ -323,14 +341,25 @@ class CausticTracer:
             sampler = mi.load_dict({"type": "independent"})
             # (opaque: a new seed or count must not compile new kernels)
             sampler.seed(dr.opaque(mi.UInt32, (seed * 7919 + 104729 * (index + 1)) & 0xFFFFFFFF), size)
-            pos, value, splat = self._trace(scene, geometry, sensor, sampler, size, per_camera_sample)
-            # (a non-finite value would spoil its pixels: none is expected, see
-            # tests/plugin/test_caustics.py, but none reaches the film)
-            splat &= dr.all(dr.isfinite(value))
+            pos, value, splat, behind = self._trace(scene, geometry, sensor, sampler, size, per_camera_sample)
             scale = dr.opaque(mi.Float, pixels / count)
-            block.put(pos + offset, [value.x * scale, value.y * scale, value.z * scale], splat)
-            dr.eval(block.tensor())
+            self._put(block, pos + offset, value * scale, splat)
+            dr.eval(block.tensor(), behind)
+            lanes = dr.compress(behind[0])
+            if dr.width(lanes) > 0:
+                behind = tuple(dr.gather(type(field), field, lanes) for field in behind)
+                pos, value, splat = self._through_chain(geometry, sensor, behind)
+                self._put(block, pos + offset, value * scale, splat)
+                dr.eval(block.tensor())
         return block.tensor()
+
+    @staticmethod
+    def _put(block: mi.ImageBlock, pos: mi.Point2f, value: mi.Spectrum, splat: mi.Bool) -> None:
+        """Splat ``value`` at film positions ``pos`` (lanes ``splat``)."""
+        # (a non-finite value would spoil its pixels: none is expected, see
+        # tests/plugin/test_caustics.py, but none reaches the film)
+        splat &= dr.all(dr.isfinite(value))
+        block.put(pos, [value.x, value.y, value.z], splat)
 
     def _emit(self, scene: mi.Scene, sampler: mi.Sampler, size: int, pick: mi.UInt32,
               per_camera_sample: mi.Float) -> tuple:
@@ -429,10 +458,13 @@ class CausticTracer:
 
     @dr.syntax
     def _trace(self, scene: mi.Scene, geometry, sensor: mi.Sensor, sampler: mi.Sampler, size: int,
-               per_camera_sample: float) -> tuple[mi.Point2f, mi.Spectrum, mi.Bool]:
+               per_camera_sample: float) -> tuple:
         """One wavefront of ``size`` particles: film positions, values (to
         be scaled by pixels / particles) and which lanes splat (values
-        not checked for being finite)."""
+        not checked for being finite) of the straight camera connections;
+        and the lanes whose connection is blocked (a mask, then D, the
+        particle's weight, eq. 32's light density and the chain's length
+        so far) for :meth:`_through_chain`."""
         check = self.normal_check
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
 
@@ -446,6 +478,7 @@ class CausticTracer:
         active = dr.max(beta) > 0.0               # Particles still going through glass
         landed = dr.zeros(mi.Bool, size)          # Particles that reached a diffuse D
         si_d = dr.zeros(mi.SurfaceInteraction3f, size)  # ... that D
+        chain_d = mi.UInt32(0)                    # ... the specular vertices before it
         ds = dr.zeros(mi.DirectionSample3f, size)  # ... its direction to the camera
         importance = mi.Spectrum(0.0)             # ... and the camera's importance there
         # The camera connection's shadow ray is tested by the next query, in
@@ -465,6 +498,7 @@ class CausticTracer:
             lands = valid & ~delta & (chain >= 1) & ~on_lathe(self.lathes, si)
             landed |= lands
             si_d[lands] = si
+            chain_d[lands] = chain
             ds_here, importance_here = sensor.sample_direction(mi.Interaction3f(si), sampler.next_2d(), lands)
             ds[lands] = ds_here
             importance[lands] = importance_here
@@ -484,7 +518,7 @@ class CausticTracer:
             redraws = (sampler.next_1d(), sampler.next_2d())
             bs, weight, wo_world = sample_with_fallback(
                 bsdf, ctx, si, si.wi, (sample_1, sample_2), redraws, cos_in_geo,
-                active & (check == "fallback"), active, geo_frame)[2:]
+                active & (check == "fallback"), active, geo_frame)[2:5]
             if dr.hint(check == "terminate", mode="scalar"):
                 active &= ~contradicts(si, cos_in_geo, bs, wo_world)
             # (1 where the geometric frame was used)
@@ -497,9 +531,28 @@ class CausticTracer:
 
         # ---------------- The camera connection at D ----------------
         splat = landed & visible & (dr.max(importance) > 0.0)
+        value, splat = self._connection(si_d, ds.d, beta, light_density, self.camera.density(si_d.p, si_d.n),
+                                        importance, splat)
+        # Eqs. 37-40: where the straight connection is blocked (a share
+        # chain_share of those lanes), the chain to the camera, solved by
+        # :meth:`_through_chain` on these lanes alone
+        blocked = landed & ~visible & (sampler.next_1d() < self.chain_share)
+        behind = (blocked, si_d, beta, light_density, chain_d)
+        return ds.uv, value, splat, behind
+
+    def _connection(self, si_d: mi.SurfaceInteraction3f, wo_world: mi.Vector3f, beta: mi.Spectrum,
+                    light_density: mi.Float, camera_density: mi.Float, connection: mi.Spectrum,
+                    splat: mi.Bool) -> tuple[mi.Spectrum, mi.Bool]:
+        """The value a particle at ``D`` (``si_d``, weight ``beta``) splats
+        through a camera connection leaving ``D`` along ``wo_world``:
+        ``connection`` is the camera's importance times what the connection
+        carries per unit area at ``D`` (over the cosine at ``D``, which the
+        BSDF value holds), ``camera_density`` path tracing's density of
+        ``D`` (eq. 32 or 40). Returns (value, splat)."""
+        ctx = mi.BSDFContext(mi.TransportMode.Importance)
         wi_world = si_d.to_world(si_d.wi)
-        wo_local = si_d.to_local(ds.d)
-        wi_geo, wo_geo = dr.dot(si_d.n, wi_world), dr.dot(si_d.n, ds.d)
+        wo_local = si_d.to_local(wo_world)
+        wi_geo, wo_geo = dr.dot(si_d.n, wi_world), dr.dot(si_d.n, wo_world)
         # Both directions on the side their shading cosines say (no light
         # leaks through shading normals)
         splat &= wi_geo * mi.Frame3f.cos_theta(si_d.wi) > 0.0
@@ -513,9 +566,33 @@ class CausticTracer:
         # then the BSDF sample from the camera's side towards the glass)
         si_cam = mi.SurfaceInteraction3f(si_d)
         si_cam.wi = wo_local
-        ctx_radiance = mi.BSDFContext()
-        pdf_bsdf = bsdf_d.pdf(ctx_radiance, si_cam, si_d.wi, splat)
-        path_density = (self.camera.density(si_d.p, si_d.n) * pdf_bsdf
-                        / dr.maximum(dr.abs(wi_geo), 1e-12))
+        pdf_bsdf = bsdf_d.pdf(mi.BSDFContext(), si_cam, si_d.wi, splat)
+        path_density = camera_density * pdf_bsdf / dr.maximum(dr.abs(wi_geo), 1e-12)
         weight = caustic_weight(light_density, path_density)
-        return ds.uv, beta * value * correction * importance * weight, splat
+        return beta * value * correction * connection * weight, splat
+
+    def _through_chain(self, geometry, sensor: mi.Sensor, behind: tuple) -> tuple:
+        """Eqs. 37-40 for the lanes ``behind`` holds (compacted: the
+        solver's loop runs for them alone): (film positions, values,
+        splat)."""
+        _, si_d, beta, light_density, chain_d = behind
+        limit = dr.minimum(self.max_chain, self.max_vertices - chain_d)
+        solution = solve_camera_chain(geometry, self.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
+                                      limit >= 1)
+        through = solution.found
+        it = dr.zeros(mi.Interaction3f, dr.width(through))
+        it.p = self.camera._origin + solution.d
+        ds, importance = sensor.sample_direction(it, mi.Point2f(0.5), through)
+        through &= (ds.pdf > 0.0) & (dr.max(importance) > 0.0)
+        # Eq. 40: the camera's density of D through the chain; the light
+        # tracer tries the chain for a share chain_share of its particles
+        camera_density = (self.camera.direction_density(solution.d) * solution.branch
+                          / solution.area_per_solid_angle)
+        # Eq. 39: the camera's importance times the chain's BSDF values and
+        # solid angle per area at D (the cosine at D is in the BSDF value)
+        cos_d = dr.maximum(dr.abs(dr.dot(si_d.n, solution.wo)), 1e-12)
+        share = self.chain_share
+        connection = importance * solution.throughput / (cos_d * solution.area_per_solid_angle * share)
+        value, splat = self._connection(si_d, solution.wo, beta, light_density * share, camera_density,
+                                        connection, through)
+        return ds.uv, value, splat

@@ -128,8 +128,9 @@ def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceIn
     Both passes go through the same call site in a loop, so the BSDFs'
     code is compiled once; packets without a contradicting vertex run it
     once. ``geo_frame``: ``mi.Frame3f(si.n)``, made once by the caller for
-    this vertex. Returns ``(value_em, pdf_em, bs, weight, wo_world)``; the
-    light direction's value and pdf are those of the first pass."""
+    this vertex. Returns ``(value_em, pdf_em, bs, weight, wo_world,
+    redrawn)``; the light direction's value and pdf are those of the first
+    pass, ``redrawn`` the lanes whose sample is the geometric frame's."""
     wi_world = si.to_world(si.wi)
     value_em = mi.Spectrum(0.0)                  # Light direction's BSDF value (first pass)
     pdf_em = mi.Float(0.0)                       # ... and its pdf
@@ -137,6 +138,7 @@ def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceIn
     weight = mi.Spectrum(0.0)                    # ... its weight
     wo_world = mi.Vector3f(0.0)                  # ... and its world direction
     geometric = dr.zeros(mi.Bool, dr.width(wi_world))  # Lanes redrawing with the geometric frame
+    redrawn = dr.zeros(mi.Bool, dr.width(wi_world))    # ... and those that did
     todo = mi.Bool(active)                       # Lanes with a pass still to run
     while todo:
         si_pass = mi.SurfaceInteraction3f(si)
@@ -152,8 +154,9 @@ def sample_with_fallback(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceIn
         weight = dr.select(todo, weight_pass, weight)
         wo_world = dr.select(todo, si_pass.to_world(bs_pass.wo), wo_world)
         geometric = first & checked & contradicts(si, cos_in_geo, bs_pass, wo_world)
+        redrawn |= geometric
         todo = geometric
-    return value_em, pdf_em, bs, weight, wo_world
+    return value_em, pdf_em, bs, weight, wo_world, redrawn
 
 
 def with_geometric_frame(si: mi.SurfaceInteraction3f, use: mi.Bool,

@@ -29,6 +29,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .camera_chain import SAME_SOLUTION, policy_branch, solve_camera_chain
 from .caustic_paths import (
     CausticTracer,
     caustic_weight,
@@ -126,7 +127,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
          point, spot and directional lights and the environment towards the
          lathes, through glass (Dirac delta
          surfaces) onto a diffuse surface seen by the camera, and connected
-         to the camera there; combined with path tracing by multiple
+         to the camera there, straight or, where the camera sees the
+         surface through glass, along the chain of refractions a Newton
+         solver finds; combined with path tracing by multiple
          importance sampling, so the image stays unbiased and its caustics
          converge many times faster. Point and spot light caustics, which
          path tracing cannot find, appear only with it. Needs an RGB variant
@@ -140,10 +143,18 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
          three camera samples, as it always goes through glass).
          (Default: 0.05)
 
+     * - caustic_camera_chains
+       - |float|
+       - Share (0 to 1) of the particles landing where the camera sees them
+         only through glass that solve for the chain of refractions to the
+         camera (a solve costs about 15 camera samples); 0 leaves caustics
+         seen through glass to path tracing alone. (Default: 0.3)
+
      * - caustic_max_chain
        - |int|
-       - Most specular vertices between the light and the diffuse surface
-         on a light-traced caustic path (also bounded by ``max_depth`` - 2);
+       - Most specular vertices between the light and the diffuse surface,
+         and between the diffuse surface and the camera, on a light-traced
+         caustic path (the two together also bounded by ``max_depth`` - 2);
          longer chains are path traced alone. (Default: 8)
 
      * - aov_through_delta
@@ -174,6 +185,10 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         if not (self.caustic_paths > 0.0 and self.caustic_paths < 1e6):
             raise ValueError(
                 f"lathe_path: parameter 'caustic_paths' must be > 0 and finite; got {self.caustic_paths}")
+        self.caustic_camera_chains = typed_property(props, "caustic_camera_chains", float, 0.3, who)
+        if not (0.0 <= self.caustic_camera_chains <= 1.0):
+            raise ValueError("lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; "
+                             f"got {self.caustic_camera_chains}")
         self.caustic_max_chain = typed_property(props, "caustic_max_chain", int, 8, who)
         if self.caustic_max_chain < 1:
             raise ValueError(
@@ -197,7 +212,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         chain = chain_length_limit(self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30,
                                    self.caustic_max_chain)
         geometry = self.geometry(scene)
-        tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check)
+        vertices = chain_length_limit(self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30, 1 << 30)
+        tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check, vertices,
+                               self.caustic_camera_chains)
         return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
 
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
@@ -273,6 +290,15 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
         caustic_chain = mi.UInt32(0)         # Its specular vertices after D
         caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
+        # Eq. 40: D seen through Dirac-delta vertices (camera -> S'.. -> D)
+        camera_chain = mi.Bool(True)         # Path so far: camera, then policy Dirac deltas only
+        camera_d = mi.Vector3f(ray.d)        # Its camera ray direction
+        camera_branch = mi.Float(1.0)        # ... and branch probabilities' product
+        d_through = mi.Bool(False)           # D was reached through such a chain
+        d_vertices = mi.UInt32(0)            # ... of this many vertices
+        d_p = mi.Point3f(0.0)                # ... D's position
+        d_n = mi.Normal3f(0.0)               # ... geometric normal
+        d_shape = dr.zeros(mi.ShapePtr, dr.width(ray.d))  # ... and shape
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
@@ -304,7 +330,21 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 light_density = dr.select(environment, density_environment, density_surface)
                 light_density *= per_camera_sample
                 both = surface | environment
-                weight = caustic_weight(caustic_density, light_density)
+                # Eq. 40: through a camera chain, the light tracer samples
+                # this path only if the solver from D finds this very chain
+                limit = dr.minimum(tracer.max_chain, tracer.max_vertices - caustic_chain)
+                # (only where the light sends particles: not a uniform sky)
+                solution = solve_camera_chain(geometry, tracer.camera._origin, d_p, d_n, d_shape, limit,
+                                              both & d_through & (light_density > 0.0)
+                                              & (tracer.chain_share > 0.0))
+                same = (solution.found & (solution.vertices == d_vertices)
+                        & (dr.norm(solution.d - camera_d) < SAME_SOLUTION))
+                light_density = dr.select(d_through, dr.select(same, tracer.chain_share * light_density, 0.0),
+                                          light_density)
+                density = dr.select(d_through, caustic_density * camera_branch
+                                    * tracer.camera.direction_density(camera_d)
+                                    / solution.area_per_solid_angle, caustic_density)
+                weight = caustic_weight(density, light_density)
                 mis_bsdf = dr.select(both, mis_bsdf * weight, mis_bsdf)
             emitted = ds.emitter.eval(si, active)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
@@ -362,13 +402,14 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 # real surface: redone with the geometric normal, through
                 # the same BSDF call (compiled once)
                 redraws = (sampler.next_1d(), sampler.next_2d())
-                bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight, wo_world = sample_with_fallback(
+                bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight, wo_world, redrawn = sample_with_fallback(
                     bsdf, bsdf_ctx, si, wo_em, (sample_1, sample_2), redraws, cos_in_geo, active_next,
                     active & valid, geo_frame)
             else:
                 bsdf_val_em, bsdf_pdf_em, bs, bsdf_weight = bsdf.eval_pdf_sample(
                     bsdf_ctx, si, wo_em, sample_1, sample_2, active & valid)
                 wo_world = si.to_world(bs.wo)
+                redrawn = mi.Bool(False)
                 if dr.hint(check == "terminate", mode="scalar"):
                     # Eq. 11, outgoing side: such a path ends here
                     active_next &= ~contradicts(si, cos_in_geo, bs, wo_world)
@@ -377,16 +418,30 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
 
             if dr.hint(caustics is not None, mode="scalar"):
                 # Eq. 32: D is the camera ray's first hit, smooth and sampled
-                # with a smooth lobe; the chain after it only Dirac deltas
+                # with a smooth lobe; the chain after it only Dirac deltas.
+                # Eq. 40: or the first such hit after Dirac deltas that took
+                # the camera chain's branches
                 first = depth == 0
-                at_d = (first & active_next & ~bad_in & ~pure_delta(bsdf) & ~on_lathe(tracer.lathes, si)
+                delta_here = pure_delta(bsdf)
+                at_d = (camera_chain & (depth <= tracer.max_chain) & active_next & ~bad_in & ~delta_here
+                        & ~on_lathe(tracer.lathes, si)
                         & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0)
                         & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
-                density_d = (tracer.camera.density(si.p, si.n) * bs.pdf
+                # (through a chain, the camera's part follows at the light)
+                density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
                              / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
                 caustic_density = dr.select(at_d, density_d, caustic_density)
-                caustic_open = dr.select(first, at_d, caustic_open & pure_delta(bsdf))
-                caustic_chain = dr.select(first, 0, caustic_chain + 1)
+                caustic_open = at_d | (caustic_open & delta_here)
+                caustic_chain = dr.select(at_d, 0, caustic_chain + 1)
+                through_d = at_d & ~first
+                d_through = dr.select(at_d, ~first, d_through)
+                d_vertices[through_d] = depth
+                d_p[through_d] = si.p
+                d_n[through_d] = si.n
+                d_shape[through_d] = si.shape
+                camera_chain &= (delta_here & ~bad_in & ~redrawn & (bs.pdf > 0.0) & policy_branch(bs)
+                                 & ~contradicts(si, cos_in_geo, bs, wo_world))
+                camera_branch[delta_here] *= bs.pdf
 
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)

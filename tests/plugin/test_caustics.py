@@ -14,11 +14,12 @@ BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0
 
 
 def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
-               crop: tuple | None = None, pixel_format: str = "rgb") -> mi.Scene:
+               crop: tuple | None = None, pixel_format: str = "rgb", pane: bool = False) -> mi.Scene:
     """A glass ball (a lathe, radius 1, resting 0.2 above a white floor)
     lit from above by a small square area light (plain or ``textured``), a
     point light or a small sphere light (``light``), seen from the side
-    so that the caustic under the ball is on the film."""
+    so that the caustic under the ball is on the film; with ``pane``,
+    through a glass pane (a lathe disk 0.1 thick) that fills the view."""
     film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"},
             "pixel_format": pixel_format}
     if crop:
@@ -35,6 +36,13 @@ def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
                  "bsdf": {"type": "dielectric", "int_ior": 1.33}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}},
     }
+    if pane:
+        camera, target = np.array([0.0, -5.0, 4.0]), np.array([0.0, 0.0, 0.6])
+        centre = camera + 1.5 * (target - camera) / np.linalg.norm(target - camera)
+        scene["pane"] = {"type": "lathe", "profile": "0 -0.05, 1.5 -0.05, 1.5 0.05, 0 0.05",
+                         "to_world": mi.ScalarTransform4f().look_at(
+                             origin=centre.tolist(), target=camera.tolist(), up=[0, 0, 1]),
+                         "bsdf": {"type": "dielectric", "int_ior": 1.5}}
     # Intensity 40 straight down in each case
     if light in ("area", "textured"):
         place = mi.ScalarTransform4f().translate([0.3, 3.0, light_z]).scale([0.25, 0.25, 1])
@@ -107,6 +115,37 @@ def test_weights_of_the_two_techniques_sum_to_one(area_scene, caustic_region):
     many = luminance(render(area_scene, 64, seed=5, caustic_paths=16.0))
     assert many[caustic_region].mean() == pytest.approx(few[caustic_region].mean(), rel=0.03)
     assert many.mean() == pytest.approx(few.mean(), rel=0.01)
+
+
+def test_caustic_seen_through_a_glass_pane():
+    """Eqs. 37-40: the whole floor is seen through a pane, so every
+    particle reaches the camera through a chain of two refractions, found
+    by the solver. The caustic agrees with plain path tracing, with the
+    default share of solving particles and with nearly all weight on the
+    solver's chains; the weights sum to one (the path tracer's check that
+    the solver finds its chain, the share in both densities); and it is
+    much less noisy than plain's."""
+    from lathe_shape.validation.caustics_bench import caustic_image
+
+    scene = ball_scene("area", pane=True)
+    region = luminance(caustic_image(scene, 256)) > 0.2 * luminance(render(scene, 256, seed=99))
+    assert region.sum() >= 20
+    plain = np.mean([luminance(render(scene, 2048, seed=s, caustics=False)) for s in range(4)], axis=0)
+    traced = luminance(render(scene, 256, seed=11))
+    assert traced[region].mean() == pytest.approx(plain[region].mean(), rel=0.03)
+    assert traced.mean() == pytest.approx(plain.mean(), rel=0.01)
+    # Nearly all weight on the light tracer's chains (every blocked particle
+    # solves): the solver's connection (eq. 39) alone against plain
+    many = np.mean([luminance(render(scene, 64, seed=30 + s, caustic_paths=16.0, caustic_camera_chains=1.0))
+                    for s in range(2)], axis=0)
+    assert many[region].mean() == pytest.approx(plain[region].mean(), rel=0.03)
+    # Both techniques weighing, a share of the particles solving (eq. 40):
+    # the same image
+    balanced = np.mean([luminance(render(scene, 128, seed=40 + s, caustic_paths=1.0,
+                                         caustic_camera_chains=0.3)) for s in range(2)], axis=0)
+    assert balanced[region].mean() == pytest.approx(many[region].mean(), rel=0.03)
+    plain_256 = luminance(render(scene, 256, seed=12, caustics=False))
+    assert np.abs(traced - plain)[region].mean() < 0.5 * np.abs(plain_256 - plain)[region].mean()
 
 
 def test_weights_sum_to_one_with_a_textured_light():
@@ -247,12 +286,15 @@ def test_crop_window_gets_the_same_caustic():
     assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
-@pytest.mark.parametrize("light_z", [1.25, 2.5])
-def test_grazing_and_total_internal_reflection_give_finite_values(light_z):
+@pytest.mark.parametrize("light_z, pane", [(1.25, False), (2.5, False), (1.25, True)])
+def test_grazing_and_total_internal_reflection_give_finite_values(light_z, pane):
     """A light just above the ball and level with its top: particles meet
     the glass at grazing angles and are totally reflected inside it; 1M
-    particles, every value finite and none negative."""
-    scene = ball_scene("area", res=64, light_z=light_z)
+    particles, every value finite and none negative, straight to the camera
+    or (behind a pane) through the chain the solver finds (eqs. 37-40)."""
+    import drjit as dr
+
+    scene = ball_scene("area", res=64, light_z=light_z, pane=pane)
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 12})
     sensor = scene.sensors()[0]
     tracer, why = integrator.caustic_setup(scene, sensor)
@@ -260,8 +302,15 @@ def test_grazing_and_total_internal_reflection_give_finite_values(light_z):
     sampler = mi.load_dict({"type": "independent"})
     size = 1 << 20
     sampler.seed(3, size)
-    pos, value, splat = tracer._trace(scene, integrator.geometry(scene), sensor, sampler, size, mi.Float(1.0))
+    geometry = integrator.geometry(scene)
+    pos, value, splat, behind = tracer._trace(scene, geometry, sensor, sampler, size, mi.Float(1.0))
     value = np.array(value).T[np.array(splat)]
+    lanes = dr.compress(behind[0])
+    behind = tuple(dr.gather(type(field), field, lanes) for field in behind)
+    chain = tracer._through_chain(geometry, sensor, behind)
+    chain_value = np.array(chain[1]).T[np.array(chain[2])]
+    assert chain_value.shape[0] > (1000 if pane else 0)
+    value = np.concatenate([value, chain_value])
     assert value.shape[0] > 1000
     assert np.isfinite(value).all()
     assert (value >= 0.0).all()
@@ -274,6 +323,9 @@ PATHS_ERROR = "lathe_path: parameter 'caustic_paths' must be > 0 and finite; got
     ({"caustic_paths": 0.0}, PATHS_ERROR + "0.0"),
     ({"caustic_paths": float("nan")}, PATHS_ERROR + "nan"),
     ({"caustic_max_chain": 0}, "lathe_path: parameter 'caustic_max_chain' must be >= 1; got 0"),
+    ({"caustic_camera_chains": 1.5}, "lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; got 1.5"),
+    ({"caustic_camera_chains": float("nan")},
+     "lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; got nan"),
 ])
 def test_parameter_errors(params, message):
     with pytest.raises(Exception) as error:
