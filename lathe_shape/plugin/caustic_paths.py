@@ -17,7 +17,9 @@ importance sampling (the power heuristic) and nothing is counted twice:
   S_k`` (``1 <= k <= max_chain``) surfaces whose BSDF is pure Dirac
   delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``); and the
   light an area emitter, a point, spot or directional light or the
-  environment.
+  environment. Also ``camera -> S'_1 ... S'_m -> D -> ...``: ``D`` seen
+  through Dirac deltas, joined to the camera along the chain that
+  :mod:`~lathe_shape.plugin.camera_chain` solves for (eqs. 37-40).
 * Every other path is path traced alone, as before.
 * On a caustic path, the two techniques' densities share the chain's
   generalized geometry term, which cancels in their ratio: eq. 32 of

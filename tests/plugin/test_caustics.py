@@ -286,6 +286,43 @@ def test_crop_window_gets_the_same_caustic():
     assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
+@pytest.mark.parametrize("lathe", ["ball", "wine glass"])
+def test_white_furnace_with_caustics(lathe):
+    """A glass (the ball, or a hollow wine glass) on a white floor (albedo 1)
+    inside a sphere that emits radiance 1 inward and reflects nothing:
+    every pixel is 1. Almost all the floor's light comes through the glass
+    or straight from the sphere; with many particles (16 per camera sample)
+    and every blocked one solving its chain to the camera, the light tracer
+    carries most of the caustic paths, and weights that did not sum to one,
+    a connection's wrong density or a chain's wrong throughput would show
+    as a mean off 1."""
+    import os
+
+    if lathe == "ball":
+        glass = {"profile": BALL}
+    else:  # the example scene's wine glass (18.1 tall), 1.5 tall
+        glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "wine_glass.csv"),
+                 "to_world": mi.ScalarTransform4f().scale(1.5 / 18.1)}
+    camera = mi.ScalarTransform4f().look_at(origin=[0, -3.5, 2.2], target=[0, 0, 0.6], up=[0, 0, 1])
+    sensor = {"type": "perspective", "fov": 40, "to_world": camera,
+              "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
+              "sampler": {"type": "independent"}}
+    scene = mi.load_dict({
+        "type": "scene", "sensor": sensor,
+        "sky": {"type": "sphere", "radius": 8, "flip_normals": True,
+                "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}},
+                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [1, 1, 1]}}},
+        "floor": {"type": "disk", "to_world": mi.ScalarTransform4f().scale([7.9, 7.9, 1]),
+                  "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
+                                                        "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}},
+        "glass": {"type": "lathe", **glass, "bsdf": {"type": "dielectric", "int_ior": 1.5}}})
+    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 64, "rr_depth": 64,
+                               "caustic_paths": 16.0, "caustic_camera_chains": 1.0})
+    image = luminance(np.array(mi.render(scene, integrator=integrator, spp=64, seed=3), dtype=np.float64))
+    assert image.mean() == pytest.approx(1.0, abs=0.01)
+    assert np.all(np.abs(image - 1.0) < 0.25)
+
+
 @pytest.mark.parametrize("light_z, pane", [(1.25, False), (2.5, False), (1.25, True)])
 def test_grazing_and_total_internal_reflection_give_finite_values(light_z, pane):
     """A light just above the ball and level with its top: particles meet
