@@ -441,7 +441,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 d_shape[through_d] = si.shape
                 camera_chain &= (delta_here & ~bad_in & ~redrawn & (bs.pdf > 0.0) & policy_branch(bs)
                                  & ~contradicts(si, cos_in_geo, bs, wo_world))
-                camera_branch[delta_here] *= bs.pdf
+                # (the chain before D only: the deltas after it cancel in eq. 32)
+                camera_branch[camera_chain] *= bs.pdf
 
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
