@@ -91,9 +91,11 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
     ``max_vertices`` Dirac-delta vertices (branches by
     :data:`POLICY_SAMPLE`, none contradicting eq. 11) and lands on ``D``
     (point ``p``, geometric normal ``n``, on ``shape``), by Newton's method
-    from the straight line, with forward differences (central ones at the
-    solution, for eq. 39). One query per loop iteration: the lathe
-    traversal is compiled once."""
+    from the straight line with forward-difference Jacobians (eq. 38; kept
+    for chord steps while the residual halves), and eq. 39's area from the
+    Jacobian at the solution. ``geometry``: the scene's
+    :class:`~lathe_shape.plugin.scene_geometry.ExactSceneGeometry`. One
+    query per loop iteration: the lathe traversal is compiled once."""
     width = dr.width(p)
     ctx = mi.BSDFContext()
     to_d = p - camera

@@ -1,8 +1,9 @@
-"""``lathe_path``'s light-traced caustics (``caustics``, eqs. 32-36):
+"""``lathe_path``'s light-traced caustics (``caustics``, eqs. 32-40):
 unbiased against plain path tracing, the two techniques' weights summing to
-one, point-light caustics that path tracing cannot find, the film holding
-what the render returns, a crop window, no NaN or Inf at grazing angles and
-total internal reflection, and the parameters' errors."""
+one, point-light caustics that path tracing cannot find, caustics seen
+through glass (the camera chains of eqs. 37-40), a white furnace, the film
+holding what the render returns, a crop window, no NaN or Inf at grazing
+angles and total internal reflection, and the parameters' errors."""
 
 from __future__ import annotations
 
