@@ -347,6 +347,10 @@ class CausticTracer:
             scale = dr.opaque(mi.Float, pixels / count)
             self._put(block, pos + offset, value * scale, splat)
             dr.eval(block.tensor(), behind)
+            # (wait here, where Dr.Jit releases Python's lock: dr.compress
+            # waits for the kernel holding it, and a Ctrl-C went unanswered
+            # until the pass had ended, tens of seconds on a long render)
+            dr.sync_thread()
             lanes = dr.compress(behind[0])
             if dr.width(lanes) > 0:
                 behind = tuple(dr.gather(type(field), field, lanes) for field in behind)
