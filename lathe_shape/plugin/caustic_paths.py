@@ -71,7 +71,6 @@ PASS_SIZE = 1 << 22
 MAX_SPHERES = 16
 
 
-
 def jit_array(kind: type, values) -> object:
     """A Dr.Jit array of ``kind`` holding ``values``, copied from a Python
     list: an array made from a NumPy buffer may keep its alignment, which
@@ -219,13 +218,12 @@ class PinholeCamera:
         to_p = p - self._origin
         dist2 = dr.squared_norm(to_p)
         d = to_p * dr.rsqrt(dist2)
-        cos_camera = dr.dot(d, self._forward)
-        solid_angle = dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3)
-        return dr.select(cos_camera > 0.0, solid_angle * dr.abs(dr.dot(n, d)) / dist2, 0.0)
+        return self.direction_density(d) * dr.abs(dr.dot(n, d)) / dist2
 
     def direction_density(self, d: mi.Vector3f) -> mi.Float:
-        """Eq. 40: the solid-angle density of the camera ray direction
-        ``d`` (unit) drawn uniformly over the whole film."""
+        """Eqs. 32 and 40: the solid-angle density of the camera ray
+        direction ``d`` (unit) drawn uniformly over the whole film (0
+        behind the camera)."""
         cos_camera = dr.dot(d, self._forward)
         return dr.select(cos_camera > 0.0, dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3), 0.0)
 

@@ -209,10 +209,10 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             return None, f"caustics need a perspective sensor (this is '{sensor.class_name()}')"
         if self.hide_emitters:
             return None, "caustics are not traced with hide_emitters"
-        chain = chain_length_limit(self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30,
-                                   self.caustic_max_chain)
+        depth = self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30
+        chain = chain_length_limit(depth, self.caustic_max_chain)
+        vertices = chain_length_limit(depth, 1 << 30)  # (both chains together)
         geometry = self.geometry(scene)
-        vertices = chain_length_limit(self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30, 1 << 30)
         tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check, vertices,
                                self.caustic_camera_chains)
         return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
