@@ -423,7 +423,8 @@ register_kind(Kind("polyline", _polyline_surface, PolylineSurface, POLYLINE_LAYO
 register_kind(Kind("bspline", _bspline_surface, BSplineSurface, BSPLINE_LAYOUT, "bspline",
                    differentiable=True, cli_name="bspline"))
 for _name in CUBIC_KINDS:
-    register_kind(Kind(_name, _cubic_surface, BSplineSurface, BSPLINE_LAYOUT, "bspline", cli_name=_name))
+    register_kind(Kind(_name, _cubic_surface, BSplineSurface, BSPLINE_LAYOUT, "bspline", differentiable=True,
+                       cli_name=_name))
 register_kind(Kind("sor", _sor_surface, SorSurface, BSPLINE_LAYOUT, "bspline", cli_name="sor"))
 
 

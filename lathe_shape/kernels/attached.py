@@ -34,6 +34,25 @@ def _point(points: mi.Float, index: mi.UInt32, active) -> mi.Point2f:
                       dr.gather(mi.Float, points, 2 * index + 1, active))
 
 
+def _controls(points: mi.Float, index, seg: mi.UInt32, active) -> list[mi.Point2f]:
+    """The 4 B-spline control points of segment ``seg``: user points, or
+    for the kinds converted to B-splines weighted sums of ``index.width``
+    user points each (eq. 18)."""
+    width = index.width
+    controls = []
+    for k in range(4):
+        if index.weights is None:
+            controls.append(_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k, active), active))
+            continue
+        control = mi.Point2f(0.0)
+        for j in range(width):
+            slot = (4 * seg + k) * width + j
+            weight = dr.gather(mi.Float, index.weights, slot, active)
+            control += weight * _point(points, dr.gather(mi.UInt32, index.controls, slot, active), active)
+        controls.append(control)
+    return controls
+
+
 def _segment(points: mi.Float, ends: mi.UInt32, seg: mi.UInt32, active):
     """Start point, direction and outward unit normal (eqs. 8-9) of segment
     ``seg``."""
@@ -133,8 +152,7 @@ def attached_bspline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t: 
     unsquared); one Newton step with the detached Jacobian moves ``(t, u)``
     by ``-J^-1 dG`` (eq. 24), and the normal follows eq. 16 at the attached
     ``u`` (the segment's chord where the tangent vanishes, as the kernel)."""
-    controls = [_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k, active), active)
-                for k in range(4)]
+    controls = _controls(points, index, seg, active)
     x = o + dr.detach(t) * d  # the detached root on the (possibly moving) ray
     rho, cos_phi, sin_phi = _azimuth(x)
     curve, tangent = _curve(controls, u)
@@ -167,8 +185,7 @@ def profile_point(points: mi.Float, index, kernel: str, seg: mi.UInt32,
     ``p0 + u (p1 - p0)``, or ``"bspline"``, eq. 12)."""
     active = mi.Bool(True)
     if kernel == "bspline":
-        controls = [_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k), active)
-                    for k in range(4)]
+        controls = _controls(points, index, seg, active)
         value, _ = _curve(controls, u)
         return value.x, value.y
     p0, delta, _ = _segment(points, index.ends, seg, active)

@@ -27,6 +27,11 @@ def differentiable_kinds() -> tuple[str, ...]:
     return tuple(name for name, kind in KINDS.items() if kind.differentiable)
 
 
+def _listed(names: tuple[str, ...]) -> str:
+    """``a, b and c``."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
 def lathe_hit(lathe: LatheShape, ray: mi.Ray3f, si: mi.SurfaceInteraction3f, active: mi.Bool) -> AttachedHit:
     """The attached local-frame hit of ``lathe`` for the detached interaction
     ``si`` of the world-space ``ray`` (lanes ``active``)."""
@@ -53,7 +58,7 @@ def differentiable_lathes(lathes: list[LatheShape]) -> list[LatheShape]:
         if not kind_of(lathe.surface).differentiable and asked:
             raise ValueError(
                 f"lathe '{lathe.id()}': gradients with respect to parameter 'points' are available "
-                f"for the kinds {' and '.join(differentiable_kinds())}, not '{lathe.surface.kind}'"
+                f"for the kinds {_listed(differentiable_kinds())}, not '{lathe.surface.kind}'"
             )
     return [lathe for lathe in lathes if kind_of(lathe.surface).differentiable]
 

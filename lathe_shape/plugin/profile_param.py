@@ -26,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..profiles import ProfileError
+from ..profiles.spline_kinds import CUBIC_KINDS, control_weights
 from ..profiles.text import PointLabels
 from ..surfaces import BSplineSurface, PolylineSurface, kind_of, make_surface
 
@@ -96,13 +97,20 @@ class ProfileIndex:
     at that end is ``normalize(w_own n_seg + w_nb n_neighbour + (c_r, c_z))``
     (eq. 10's vertex normals: an average, a crease, or the axial normal of
     a smooth cap). B-splines: ``controls`` holds the user indices of the 4
-    control points of every segment.
+    control points of every segment. The kinds converted to B-splines
+    (``bezier``, ``catmull_rom``, ``quadratic``): each of a segment's 4
+    B-spline controls is a weighted sum of ``width`` user points (eq. 18),
+    ``controls`` their indices and ``weights`` their weights (``width`` per
+    control, 4 controls per segment); for ``bspline`` ``width`` is 1 and
+    ``weights`` None.
     """
 
     ends: mi.UInt32 | None = None
     blend: mi.Float | None = None
     neighbour: mi.UInt32 | None = None
     controls: mi.UInt32 | None = None
+    weights: mi.Float | None = None
+    width: int = 1
 
 
 def _user_index(user: np.ndarray, canonical: np.ndarray) -> np.ndarray:
@@ -160,10 +168,36 @@ def _bspline_controls(given: ProfileInput, profile) -> np.ndarray:
     return seg
 
 
+def _cubic_controls(given: ProfileInput, profile) -> tuple[np.ndarray, np.ndarray]:
+    """``(indices, weights)``, both (n_seg, 4, w): the user points and
+    weights whose sums are the canonical segments' B-spline controls of a
+    ``bezier``, ``catmull_rom`` or ``quadratic`` profile (eq. 18), after
+    its orientation (a reversed curve reverses the segments and each
+    segment's controls)."""
+    windows, weights = control_weights(given.kind, len(given.points))
+    weights = np.where(np.abs(weights) < 1e-12, 0.0, weights)  # (the basis change's rounding)
+    indices = np.broadcast_to(windows[:, None, :], (len(windows), 4, windows.shape[1]))
+    weights = np.broadcast_to(weights[None], indices.shape)
+    controls = np.einsum("ikj,ikjc->ikc", weights, given.points[indices])
+    scale = max(float(np.abs(given.points).max()), 1.0)
+    if not np.allclose(controls, profile.segment_controls, rtol=0.0, atol=1e-9 * scale):
+        indices, weights = indices[::-1, ::-1], weights[::-1, ::-1]  # reversed to run clockwise
+        controls = controls[::-1, ::-1]
+    if not np.allclose(controls, profile.segment_controls, rtol=0.0, atol=1e-9 * scale):
+        raise AssertionError("B-spline controls of the profile not found from its points")
+    return indices, weights
+
+
 def profile_index(surface: PolylineSurface | BSplineSurface) -> ProfileIndex:
     """The :class:`ProfileIndex` of a surface built with :func:`remember_input`."""
     given = surface.given
     profile = surface.profile
+    if given.kind in CUBIC_KINDS:
+        indices, weights = _cubic_controls(given, profile)
+        index = ProfileIndex(controls=mi.UInt32(indices.ravel().astype(np.uint32)),
+                             weights=mi.Float(weights.ravel().astype(np.float32)), width=indices.shape[2])
+        dr.make_opaque(index.controls, index.weights)
+        return index
     if kind_of(surface).kernel == "bspline":
         seg = _bspline_controls(given, profile)
         controls = mi.UInt32(seg.ravel().astype(np.uint32))

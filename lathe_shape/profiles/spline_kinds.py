@@ -38,7 +38,7 @@ from . import bspline as bs
 from .bspline import BSplineError, BSplineProfile
 from .limits import BSPLINE_SAMPLES_PER_SEGMENT
 
-__all__ = ["CUBIC_KINDS", "kind_coefficients", "make_cubic_profile", "to_bspline_controls",
+__all__ = ["CUBIC_KINDS", "control_weights", "kind_coefficients", "make_cubic_profile", "to_bspline_controls",
            "curve_form", "bezier_points", "catmull_rom_through", "quadratic_through"]
 
 #: Power-basis matrices (rows: 1, t, t^2, t^3) of each kind's window of
@@ -95,6 +95,21 @@ def kind_coefficients(kind: str, points: np.ndarray, source: str = "profile") ->
     count = (len(p) - width) // step + 1
     index = np.arange(count)[:, None] * step + np.arange(width)[None, :]
     return np.einsum("kj,ijc->ick", matrix, p[index])
+
+
+def control_weights(kind: str, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """The linear map from the ``n_points`` control points of a ``kind``
+    curve to its segments' uniform B-spline control points (eqs. 17-18):
+    ``(windows, weights)``, ``windows`` (n_seg, w) the indices of each
+    segment's window of points and ``weights`` (4, w) the fixed weights, so
+    that B-spline control ``k`` of segment ``i`` is ``sum_j weights[k, j]
+    points[windows[i, j]]`` (before :func:`make_cubic_profile` may reverse
+    the curve). The same for r and z."""
+    matrix, step = _MATRICES[kind]
+    width = matrix.shape[1]
+    count = (n_points - width) // step + 1
+    windows = np.arange(count)[:, None] * step + np.arange(width)[None, :]
+    return windows, _TO_BSPLINE @ matrix
 
 
 def to_bspline_controls(coef: np.ndarray) -> np.ndarray:

@@ -269,8 +269,10 @@ def hollow_scene(points: np.ndarray, resolution: int = 32,
     ``frequency``); ``"envmap"``, an environment map affine in the
     direction (shown wrongly by ``lathe_prb``, see the module docstring);
     ``"backdrop"``, emissive rectangles behind and below the glass (their
-    edges can be seen through it). The lathe's reference is ``proxy`` (only
-    exact integrators render it)."""
+    edges can be seen through it); ``"mask"``, the glass's silhouette (the
+    lathe black and diffuse in front of a uniform white sphere: 0 on the
+    glass, 1 elsewhere). The lathe's reference is ``proxy`` (only exact
+    integrators render it)."""
     transform = mi.ScalarTransform4f
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     middle = 0.5 * float(points[:, 1].max() + points[:, 1].min())
@@ -280,13 +282,21 @@ def hollow_scene(points: np.ndarray, resolution: int = 32,
         return {"type": "area", "radiance": {"type": "bitmap", "data": texture, "raw": True,
                                              "filter_type": "bilinear"}}
 
+    mask = lighting == "mask"
+    bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}} if mask else \
+        {"type": "dielectric", "int_ior": 1.5}
     scene: dict[str, object] = {
         "type": "scene",
-        "integrator": {"type": integrator, "max_depth": max_depth},
+        "integrator": {"type": integrator, "max_depth": 1 if mask else max_depth},
         lathe_id: {"type": "lathe", "profile": profile_string(points), "kind": "polyline",
-                   "reference": "proxy", "bsdf": {"type": "dielectric", "int_ior": 1.5}},
+                   "reference": "proxy", "bsdf": bsdf},
     }
-    if lighting == "sphere":
+    if mask:
+        # The glass's silhouette: a black lathe in front of uniform white
+        scene["sky"] = {"type": "sphere", "radius": 40.0, "center": [0.0, 0.0, middle], "flip_normals": True,
+                        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}},
+                        "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}}
+    elif lighting == "sphere":
         # An emissive sphere around everything, seen from inside, whose
         # radiance is a smooth function of the direction from the glass
         # (no edge anywhere the camera can see, through the glass or not).
@@ -368,16 +378,22 @@ class HollowResult:
     targets: list[np.ndarray] = field(default_factory=list)
 
 
-def _write(params, key: str, points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
-    """Set the points if they make a valid hollow profile (and the lathe
-    accepts them); False (nothing written) otherwise."""
-    return hollow_valid(points, n_outer, min_thickness) and _write_points(params, key, points)
+def _write(targets: list[tuple[object, str]], points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
+    """Set the points of every ``(params, key)`` in ``targets`` if they make
+    a valid hollow profile (and the lathe accepts them); False (nothing
+    written) otherwise."""
+    if not hollow_valid(points, n_outer, min_thickness) or not _write_points(*targets[0], points):
+        return False
+    for params, key in targets[1:]:
+        _write_points(params, key, points)
+    return True
 
 
 def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resolution: int = 32, spp: int = 8,
                    learning_rate: float = 0.02, smoothness: float = 1e-3, spacing: float = 3e-3,
                    views: tuple[tuple[float, float], ...] = GLASS_VIEWS, max_depth: int = 8,
                    seed: int = 0, start_jitter: float = 0.0, levels: int = 5, frequency: float = 2.5,
+                   silhouette_weight: float = 0.0,
                    report: Callable[[int, float, tuple[float, float]], None] | None = None) -> HollowResult:
     """Recover the hollow profile ``target`` (polyline, first ``n_outer``
     points the outer wall) from renders of the clear glass in ``views``
@@ -413,6 +429,13 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
     scene = hollow_scene(current, resolution, views, max_depth, frequency=frequency)
     params = mi.traverse(scene)
     key = points_key(params, scene_lathes(scene)[0])
+    written = [(params, key)]
+    if silhouette_weight > 0.0:
+        # The silhouettes of the same views (a user segments the photographs)
+        mask_targets = render_views(hollow_scene(target, resolution, views, lighting="mask"), spp, seed)
+        mask_scene = hollow_scene(current, resolution, views, lighting="mask")
+        mask_params = mi.traverse(mask_scene)
+        written.append((mask_params, points_key(mask_params, scene_lathes(mask_scene)[0])))
     result.before = [np.array(image) for image in render_views(scene, spp, seed)]
     optimizer = mi.ad.Adam(lr=learning_rate)
     optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
@@ -424,14 +447,19 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
         loss = decay ** 2 * (smoothness * _smoothness(optimizer["points"])
                              + spacing * _spacing(optimizer["points"]))
         loss += _multiscale_loss(render_views(scene, spp, seed, params), targets, levels)
+        if silhouette_weight > 0.0:
+            mask_params[written[1][1]] = optimizer["points"]
+            mask_params.update()
+            loss += silhouette_weight * _multiscale_loss(render_views(mask_scene, spp, seed, mask_params),
+                                                         mask_targets, levels)
         dr.backward(loss)
         optimizer.step()
         proposal = project_hollow(np.array(optimizer["points"]), n_outer, min_radius, min_thickness)
         step = 1.0
-        while not _write(params, key, current + step * (proposal - current), n_outer, min_thickness):
+        while not _write(written, current + step * (proposal - current), n_outer, min_thickness):
             step *= 0.5
             if step < 1e-3:
-                _write(params, key, current, n_outer, min_thickness)
+                _write(written, current, n_outer, min_thickness)
                 break
         current = np.array(params[key], dtype=np.float64).reshape(-1, 2)
         optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
