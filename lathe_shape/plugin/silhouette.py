@@ -18,7 +18,10 @@ closed form for a pinhole at ``c`` (local frame, eq. 27): a profile point
 ``rho_c, phi_c`` the camera's polar coordinates; on a polyline segment the
 argument is constant (a cone's outline is two generators), on a B-spline it
 varies along the curve. A polyline's joint circles are outline too where
-the two adjacent cones face the camera differently. The outline pieces are
+the two adjacent cones face the camera differently, and so is a crease of
+the shading normal that the camera sees (eq. 10's sharp joints: the
+radiance jumps across it, and it moves with its joint point). The outline
+pieces are
 material points ``(segment, u, phi)``, placed detached; their positions are
 attached to the profile points, and a tangential slide of a material point
 along the outline does not change ``n . dx``, so the point's own motion
@@ -49,6 +52,11 @@ __all__ = ["OutlineSamples", "outline_backward", "outline_forward", "outline_rad
 #: grazes a joint (kernels/polyline.py); 0.02 lost a quarter of the outline.
 _EPSILON = 0.1
 
+#: The side rays' offset at a crease seen from the front of both cones
+#: (no grazing there): close, so that near the crease's ends, where it
+#: meets an outline tangentially, the rays stay on the lathe.
+_CREASE_EPSILON = 0.01
+
 #: Outline samples per pixel of image length (at least 4 per piece).
 _DENSITY = 2.0
 
@@ -60,17 +68,21 @@ class OutlineSamples:
     position ``x`` (numpy, (n, 2), pixels)."""
 
     def __init__(self) -> None:
-        self.parts: list[tuple[LatheShape, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.parts: list[tuple[LatheShape, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               np.ndarray]] = []
 
-    def add(self, lathe, seg, u, phi, normal_dl, x) -> None:
+    def add(self, lathe, seg, u, phi, normal_dl, x, offset: float | np.ndarray | None = None) -> None:
+        """Pieces, with the side rays' ``offset`` (pixels, default
+        :data:`_EPSILON`)."""
         if len(seg):
-            self.parts.append((lathe, seg, u, phi, normal_dl, x))
+            offset = np.broadcast_to(_EPSILON if offset is None else offset, (len(seg),))
+            self.parts.append((lathe, seg, u, phi, normal_dl, x, offset))
 
     def merged(self) -> list[tuple]:
         """The parts concatenated per lathe (in the order first added)."""
         lathes = list(dict.fromkeys(part[0] for part in self.parts))
         return [(lathe, *(np.concatenate([part[k] for part in self.parts if part[0] is lathe])
-                          for k in range(1, 6))) for lathe in lathes]
+                          for k in range(1, 7))) for lathe in lathes]
 
 
 def _project(sensor: mi.Sensor, points: np.ndarray) -> np.ndarray:
@@ -159,11 +171,14 @@ def _segment_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -
         _add_pieces(out, sensor, lathe, seg, u_lo, u_hi, branch, camera)
 
 
-def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
-                 camera: np.ndarray) -> list[tuple[float, float]]:
+def _facing_arcs(r: float, z: float, normals: list[np.ndarray], camera: np.ndarray,
+                 creased: bool = False) -> list[tuple[float, float, bool]]:
     """Azimuth intervals of the joint circle ``(r, z)`` where the two cones
-    of ``normals`` face the camera differently: between consecutive roots
-    of eq. 27 for either cone (the ends of their outline generators)."""
+    of ``normals`` face the camera differently (an outline), and where the
+    joint is a shading crease (``creased``) also those where both face it
+    (a crease seen directly: the shading normal, hence the radiance, jumps
+    across it): between consecutive roots of eq. 27 for either cone (the
+    ends of their outline generators), each with whether it is a crease."""
     roots = [0.0, 2 * np.pi]
     for n in normals:
         for branch in (1.0, -1.0):
@@ -176,15 +191,17 @@ def _facing_arcs(r: float, z: float, normals: list[np.ndarray],
         mid = 0.5 * (lo + hi)
         to_camera = camera - np.array([r * np.cos(mid), r * np.sin(mid), z])
         sides = [np.dot([n[0] * np.cos(mid), n[0] * np.sin(mid), n[1]], to_camera) > 0 for n in normals]
-        if hi > lo and sides[0] != sides[1]:
-            arcs.append((lo, hi))
+        if hi > lo and (sides[0] != sides[1] or (creased and sides[0] and sides[1])):
+            arcs.append((lo, hi, sides[0] == sides[1]))
     return arcs
 
 
 def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> None:
     """Polylines: the arcs of the joint circles between two cones that face
-    the camera differently (one front-, one back-facing). One projection for
-    all arcs."""
+    the camera differently (one front-, one back-facing), and of the
+    creases (where the interpolated shading normal jumps, eq. 10, or
+    everywhere on a lathe shaded flat) that the camera sees from the front
+    of both cones. One projection for all arcs."""
     profile = lathe.profile
     _, p1 = profile.segment_points()
     normals = profile.segment_normals()
@@ -197,19 +214,21 @@ def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> 
         r, z = p1[k]
         if r <= 0.0:
             continue
-        for lo, hi in _facing_arcs(r, z, [normals[k], normals[j]], camera):
+        creased = not lathe.smooth or not np.allclose(profile.normal_end[k], profile.normal_start[j], atol=1e-9)
+        for lo, hi, crease in _facing_arcs(r, z, [normals[k], normals[j]], camera, creased):
             count = int(np.clip(np.ceil(_DENSITY * (hi - lo) * r * size), 2, 8192))
             edges = np.linspace(lo, hi, count + 1)
-            arcs.append((np.full(count, k), np.full(count, r), np.full(count, z), edges[:-1], edges[1:]))
+            arcs.append((np.full(count, k), np.full(count, r), np.full(count, z), edges[:-1], edges[1:],
+                         np.full(count, _CREASE_EPSILON if crease else _EPSILON)))
     if not arcs:
         return
-    seg, r, z, lo, hi = (np.concatenate(column) for column in zip(*arcs, strict=True))
+    seg, r, z, lo, hi, offset = (np.concatenate(column) for column in zip(*arcs, strict=True))
     phi = 0.5 * (lo + hi)
     world = np.concatenate([_world(lathe, r, z, azimuth) for azimuth in (lo, hi, phi)])
     x_lo, x_hi, x_mid = np.split(_project(sensor, world), 3)
     step = x_hi - x_lo
     normal_dl = np.stack([-step[:, 1], step[:, 0]], axis=1)
-    out.add(lathe, seg, np.ones(len(seg)), phi, normal_dl, x_mid)
+    out.add(lathe, seg, np.ones(len(seg)), phi, normal_dl, x_mid, offset)
 
 
 def outline_samples(sensor: mi.Sensor, lathes: list[LatheShape]) -> OutlineSamples:
@@ -243,12 +262,12 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
 
 
 def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray, normal_dl: np.ndarray,
-                   seed: int, spp: int) -> mi.Spectrum:
+                   seed: int, spp: int, epsilon: np.ndarray | float = _EPSILON) -> mi.Spectrum:
     """The integrator's primal radiance (times the sensor weight, not yet
     evaluated) of camera rays at ``x - eps n`` and ``x + eps n``, ``spp``
     rounds of both."""
     width, height = sensor.film().crop_size()
-    offset = _EPSILON * normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    offset = np.reshape(epsilon, (-1, 1)) * normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
     positions = np.tile(np.concatenate([x - offset, x + offset]), (spp, 1))
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
@@ -312,16 +331,17 @@ def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, sp
     width, height = sensor.film().crop_size()
     x = np.concatenate([part[5] for part in parts])
     normal_dl = np.concatenate([part[4] for part in parts])
+    offset = np.concatenate([part[6] for part in parts])
     positions = [attached_outline_positions(sensor, *part[:4]) for part in parts]
     # The side radiance and the visibility of the outline points
     # (outline_visible) in one evaluation
     hidden = [_hidden(integrator, scene, sensor, dr.detach(points)) for _, points in positions]
-    radiance = _side_radiance(scene, sensor, integrator, x, normal_dl, seed + 7919, spp)
+    radiance = _side_radiance(scene, sensor, integrator, x, normal_dl, seed + 7919, spp, offset)
     dr.eval(radiance, *hidden)
     weight = _difference(radiance, normal_dl, spp)
     weight *= ~np.concatenate([np.array(mask) for mask in hidden])[:, None]
     start = 0
-    for (_, seg, _, _, part_normal_dl, part_x), (position, _) in zip(parts, positions, strict=True):
+    for (_, seg, _, _, part_normal_dl, part_x, _), (position, _) in zip(parts, positions, strict=True):
         unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
         speed = position.x * mi.Float(unit[:, 0].astype(np.float32)) + position.y * mi.Float(
             unit[:, 1].astype(np.float32))
