@@ -21,8 +21,7 @@ varies along the curve. A polyline's joint circles are outline too where
 the two adjacent cones face the camera differently, and so is a crease of
 the shading normal that the camera sees (eq. 10's sharp joints: the
 radiance jumps across it, and it moves with its joint point). The outline
-pieces are
-material points ``(segment, u, phi)``, placed detached; their positions are
+pieces are material points ``(segment, u, phi)``, placed detached; their positions are
 attached to the profile points, and a tangential slide of a material point
 along the outline does not change ``n . dx``, so the point's own motion
 gives the outline's. ``f_in - f_out`` is estimated with camera rays just
@@ -214,7 +213,8 @@ def _joint_outlines(out: OutlineSamples, sensor, lathe, camera, size: float) -> 
         r, z = p1[k]
         if r <= 0.0:
             continue
-        creased = not lathe.smooth or not np.allclose(profile.normal_end[k], profile.normal_start[j], atol=1e-9)
+        creased = not lathe.smooth or not np.allclose(profile.normal_end[k], profile.normal_start[j],
+                                                      atol=1e-9)
         for lo, hi, crease in _facing_arcs(r, z, [normals[k], normals[j]], camera, creased):
             count = int(np.clip(np.ceil(_DENSITY * (hi - lo) * r * size), 2, 8192))
             edges = np.linspace(lo, hi, count + 1)
@@ -267,7 +267,8 @@ def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray
     evaluated) of camera rays at ``x - eps n`` and ``x + eps n``, ``spp``
     rounds of both."""
     width, height = sensor.film().crop_size()
-    offset = np.reshape(epsilon, (-1, 1)) * normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    unit = normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+    offset = np.reshape(epsilon, (-1, 1)) * unit
     positions = np.tile(np.concatenate([x - offset, x + offset]), (spp, 1))
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
