@@ -33,7 +33,8 @@ from ..kernels.top_level import NO_LATHE
 from .integrator_base import contradicts
 from .line_walk import start_walk
 
-__all__ = ["NEWTON_STEPS", "POLICY_SAMPLE", "ChainSolution", "policy_branch", "solve_camera_chain"]
+__all__ = ["NEWTON_STEPS", "POLICY_SAMPLE", "ChainSolution", "chain_vertex", "policy_branch",
+           "solve_camera_chain"]
 
 #: Newton steps at most (a chord step traces one chain, a step with a new
 #: Jacobian three; the seed is usually within four steps of the solution).
@@ -63,6 +64,19 @@ def policy_branch(bs: mi.BSDFSample3f) -> mi.Bool:
     """Whether a Dirac-delta sample took the branch :data:`POLICY_SAMPLE`
     takes: a transmission, or a reflection with nothing else possible."""
     return mi.has_flag(bs.sampled_type, mi.BSDFFlags.Transmission) | (bs.pdf >= 1.0 - 1e-6)
+
+
+def chain_vertex(si: mi.SurfaceInteraction3f, cos_in_geo: mi.Float, bs: mi.BSDFSample3f,
+                 wo: mi.Vector3f) -> mi.Bool:
+    """Whether a Dirac-delta vertex can be a vertex of a camera chain (eq.
+    40): eq. 11 holds on the incident side (``cos_in_geo``, the cosine of
+    the incident direction with the geometric normal) and on the outgoing
+    side (``wo``, world), and the sample ``bs`` has a probability and took
+    the fixed branch (:func:`policy_branch`). The solver and path tracing's
+    weights use this one rule: eq. 40 stays unbiased only where both agree
+    exactly."""
+    return ((cos_in_geo * mi.Frame3f.cos_theta(si.wi) > 0.0) & (bs.pdf > 0.0) & policy_branch(bs)
+            & ~contradicts(si, cos_in_geo, bs, wo))
 
 
 class ChainSolution:
@@ -139,10 +153,9 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
         delta = valid & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
         through = going & delta & (m < max_vertices)
         cos_in_geo = dr.dot(si.n, -ray.d)
-        bad = through & (cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0)
-        bs, weight = bsdf.sample(ctx, si, POLICY_SAMPLE, mi.Point2f(0.5), through & ~bad)
+        bs, weight = bsdf.sample(ctx, si, POLICY_SAMPLE, mi.Point2f(0.5), through)
         wo = si.to_world(bs.wo)
-        bad |= through & ((bs.pdf <= 0.0) | ~policy_branch(bs) | contradicts(si, cos_in_geo, bs, wo))
+        bad = through & ~chain_vertex(si, cos_in_geo, bs, wo)
         branch[through] *= bs.pdf
         throughput[through] *= weight * bs.pdf
         m[through] += 1

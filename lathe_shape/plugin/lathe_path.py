@@ -29,7 +29,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .camera_chain import SAME_SOLUTION, policy_branch, solve_camera_chain
+from .camera_chain import SAME_SOLUTION, chain_vertex, solve_camera_chain
 from .caustic_paths import (
     CausticTracer,
     caustic_weight,
@@ -439,8 +439,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 d_p[through_d] = si.p
                 d_n[through_d] = si.n
                 d_shape[through_d] = si.shape
-                camera_chain &= (delta_here & ~bad_in & ~redrawn & (bs.pdf > 0.0) & policy_branch(bs)
-                                 & ~contradicts(si, cos_in_geo, bs, wo_world))
+                # (bad_in, redrawn: the fallback policy changed the frame)
+                camera_chain &= delta_here & ~bad_in & ~redrawn & chain_vertex(si, cos_in_geo, bs, wo_world)
                 # (the chain before D only: the deltas after it cancel in eq. 32)
                 camera_branch[camera_chain] *= bs.pdf
 
