@@ -11,14 +11,17 @@ height) per iteration; writes convergence.png and the target, before and
 after images of every view to -o/--output.
 
 ``--kind hollow`` recovers both walls of a clear glass (dielectric, IOR 1.5)
-in front of a smooth coloured environment, seen level and from above,
-starting from a hollow cylinder; it prints the outer and the inner wall's
-RMS errors per iteration (defaults there: 40 iterations, 32x32, 8 spp,
-step 0.02, smoothness 1e-3).
+inside a smooth coloured emissive sphere, seen level, from above and from
+below, starting from a hollow cylinder, from the three renders and their
+silhouettes (the glass black before white: what segmenting the photographs
+gives; ``--silhouette-weight`` weighs their loss, 0 leaves them out); it
+prints the outer and the inner wall's RMS errors per iteration (defaults
+there: 120 iterations, 32x32, 8 spp, step 0.02, smoothness 1e-3,
+silhouette weight 4).
 
     python scripts/inverse_design.py [--kind polyline|bspline|hollow] [--iterations 60] [--resolution 32x32]
                                      [--spp 16] [--learning-rate 0.02] [--smoothness 3e-3]
-                                     [--spacing 3e-3] [--seed 0] [-o inverse_out]
+                                     [--spacing 3e-3] [--silhouette-weight 4] [--seed 0] [-o inverse_out]
                                      [--variant llvm_ad_rgb]
 
 The views are square: ``--resolution`` is ``NxN`` or ``N``.
@@ -51,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="profile parameterisation, or 'hollow': a clear hollow wine glass, both walls "
                              "(default: polyline)")
     parser.add_argument("--iterations", type=int, default=None,
-                        help="optimisation steps (default: 60; hollow: 40)")
+                        help="optimisation steps (default: 60; hollow: 120)")
     add_render_options(parser, spp_default=None, resolution_default="32x32", defines=False,
                        spp_help="16; hollow: 8",
                        seed_help="seed of the pixel samples (default: 0)")
@@ -62,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "hollow: 1e-3)")
     parser.add_argument("--spacing", type=float, default=3e-3,
                         help="even-spacing regulariser weight (decays hundredfold; default: 3e-3)")
+    parser.add_argument("--silhouette-weight", type=float, default=4.0,
+                        help="hollow only: weight of the silhouettes' loss against the renders' (default: 4; "
+                             "0: the renders alone)")
     add_output_option(parser, default="inverse_out",
                       what="convergence.png and view_K_{target,before,after}.png")
     return parser
@@ -87,7 +93,8 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
 
     target, n_outer = HIDDEN_HOLLOW["wine_glass"]
     result = recover_hollow(target, n_outer, args.iterations, side, args.spp, args.learning_rate,
-                            args.smoothness, args.spacing, seed=args.seed, report=report)
+                            args.smoothness, args.spacing, seed=args.seed,
+                            silhouette_weight=args.silhouette_weight, report=report)
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
                             f"hollow wine glass: {side}x{side}, {args.spp} spp, three views")
     paths = write_result_images(result, out)
@@ -105,12 +112,14 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
 def inverse_design(args: argparse.Namespace) -> int:
     hollow = args.kind == "hollow"
     if args.iterations is None:
-        args.iterations = 40 if hollow else 60
+        args.iterations = 120 if hollow else 60
     if args.spp is None:
         args.spp = 8 if hollow else 16
     if args.smoothness is None:
         args.smoothness = 1e-3 if hollow else 3e-3
     check_at_least("--iterations", args.iterations, 1)
+    if not args.silhouette_weight >= 0.0:
+        raise CliError(f"--silhouette-weight must be >= 0, got {args.silhouette_weight:g}")
     check_at_least("--spp", args.spp, 1)
     side = square_resolution(args.resolution)
     select_variant(args.variant)

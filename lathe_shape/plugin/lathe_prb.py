@@ -63,7 +63,8 @@ __all__ = ["LathePRBIntegrator", "register"]
 MAX_DIFFERENTIAL_DEPTH = 64
 
 #: Cosine (incident or outgoing, with the shading normal) below which a Dirac
-#: delta vertex's direction and weight are differentiated no more (eq. 30).
+#: delta vertex's direction and weight are differentiated no more (eq. 30):
+#: the default of the ``grazing_cosine`` parameter.
 GRAZING_COSINE = 0.2
 
 
@@ -102,7 +103,8 @@ def scene_lobes(scene: mi.Scene) -> tuple[bool, bool]:
 
 def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
                         bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool,
-                        lobes: tuple[bool, bool] = (True, True)) -> tuple[mi.Vector3f, mi.Spectrum]:
+                        lobes: tuple[bool, bool] = (True, True),
+                        grazing_cosine: float = GRAZING_COSINE) -> tuple[mi.Vector3f, mi.Spectrum]:
     """The sampled direction ``wo_world`` and a factor of primal value 1
     carrying the derivative of the sample's weight, at the attached vertex
     ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
@@ -113,7 +115,7 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     its weight follows the attached BSDF value (eq. 29). Near grazing and
     near the critical angle these derivatives are unbounded and left out
     (eq. 30). ``lobes``: whether the scene has delta lobes, and other
-    lobes (:func:`scene_lobes`)."""
+    lobes (:func:`scene_lobes`); ``grazing_cosine``: eq. 30's threshold."""
     has_delta, has_smooth = lobes
     if not has_delta:
         value = bsdf.eval(ctx, si, si.to_local(wo_world), active)
@@ -135,9 +137,9 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     cos_t = -dr.mulsign(dr.safe_sqrt(1.0 - dr.square(eta_ti) * (1.0 - dr.square(cos_i))), dr.detach(cos_i))
     wo_local = dr.select(reflected, mi.reflect(wi), mi.refract(wi, cos_t, eta_ti))
     cos_t_detached = dr.abs(dr.detach(cos_t))
-    grazing = delta & (dr.abs(dr.detach(cos_i)) < GRAZING_COSINE)
-    grazing |= delta & ~reflected & (cos_t_detached < GRAZING_COSINE)
-    critical = fresnel & (cos_t_detached < GRAZING_COSINE)
+    grazing = delta & (dr.abs(dr.detach(cos_i)) < grazing_cosine)
+    grazing |= delta & ~reflected & (cos_t_detached < grazing_cosine)
+    critical = fresnel & (cos_t_detached < grazing_cosine)
     turned = dr.replace_grad(wo_world, si.to_world(wo_local))
     wo_world = dr.select(delta & ~grazing, turned, wo_world)
     # Eq. 28: F of the interface (IOR inside over outside) at the attached angle
@@ -199,6 +201,14 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
      * - silhouette_spp
        - |int|
        - Camera rays on each side of every outline sample. (Default: 4)
+
+     * - grazing_cosine
+       - |float|
+       - Eq. 30: a Dirac-delta vertex whose incident or outgoing cosine is
+         below this is not differentiated (its derivative is unbounded
+         there). Lower values leave out less of the derivative of paths
+         that graze a wall seen through glass, at the price of a heavier
+         tail (more variance). In (0, 1). (Default: 0.2)
     """
 
     plugin_name = "lathe_prb"
@@ -211,6 +221,10 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, who)
         if self.silhouette_spp < 1:
             raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
+        self.grazing_cosine = typed_property(props, "grazing_cosine", float, GRAZING_COSINE, who)
+        if not 0.0 < self.grazing_cosine < 1.0:
+            raise ValueError("lathe_prb: parameter 'grazing_cosine' must be in (0, 1), "
+                             f"got {self.grazing_cosine:g}")
         self._differentiating = False
         self._lobes = (True, True)
 
@@ -348,7 +362,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             # compound along a glass's chain; a camera ray's or a diffuse
             # bounce's hit moves as it must)
             slope = dr.abs(cos_in_geo) * dr.rcp(dr.norm(dr.detach(ray.d)))
-            grazing = si_detached.is_valid() & (slope < GRAZING_COSINE)
+            grazing = si_detached.is_valid() & (slope < self.grazing_cosine)
             si = dr.select(grazing & path.bsdf_delta_prev & (depth > 0), si_detached, si)
 
         # ------------ Eq. 11, incident side (eq. 25: decided detached) ------------
@@ -409,7 +423,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if attached:
             dr.eval(bs, bsdf_weight, wo_world, sample_2, active_next)  # (as the hit)
             wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
-                                                   self._lobes)
+                                                   self._lobes, self.grazing_cosine)
             bsdf_weight = bsdf_weight * factor
         beta = beta * bsdf_weight
         eta = eta * bs.eta

@@ -22,25 +22,27 @@ not: an edge in it, refracted by the glass, moves discontinuously with the
 profile, and ``lathe_prb`` does not differentiate that. The glass stands
 inside a large emissive sphere whose radiance is a smooth function of the
 direction (:func:`_sphere_texture`, continuous across the uv seam and at
-the poles). The earlier envmap lighting showed, under ``lathe_prb`` only,
-two flat colours split by a hard vertical edge behind the glass: the
-integrator's default ``normal_check='fallback'`` re-expresses ``wi`` in the
-shading frame of every lane, missed rays included, so an envmap is looked up
-in a wrong direction (``lathe_path``, and ``lathe_prb`` with
-``normal_check='none'``, show it right). With the sphere, at the start
-profile, the whole image's forward-mode derivative agrees with central
-differences (4 x 512 spp, 32 x 32) with per-pixel correlation 0.87-0.96
-(outer bowl radius, inner wall radius, level and 32 degree views; the
-remaining mismatch at the outline columns and the rim's inner edge seen
-from above: outlines seen through glass, 0.74 for the rim height there);
-with the envmap, 0.57 and an AD norm 3x the FD norm.
+the poles). For the same reason the lathe's joints are shaded smoothly up
+to 60 degrees (see :func:`hollow_scene`).
 
-Measured (40 steps, 32x32, 8 spp, three views, 5 pyramid levels, seeds
-0-2, see /tmp/readme_inverse.md for the numbers): both walls improve, but
-neither reaches the 1% aimed at. With a smooth light the loss along the
-straight path from the start to the target falls monotonically, yet the
-optimisation finds lower losses by shrinking the glass (a wrong basin); more
-views and coarser pyramid levels counter it in part.
+The renders alone leave the problem ill-posed: a thin wall of even
+thickness shifts the rays through it only slightly, and the optimisation
+found lower losses by shrinking the glass (40 steps, seeds 0-2: 3.2-5.0%
+of the height on the outer wall, 3.6-4.8% on the inner). A user who has
+photographs can also segment them: ``silhouette_weight`` adds the
+silhouettes of the same views (the lathe black before white,
+``lighting="mask"``) to the loss. Their gradient is the outline term's,
+which agrees with finite differences of the silhouette loss within 10-25%;
+the renders' gradient with respect to the inner wall is 2-4x smaller than
+its finite difference (grazing paths through the walls, eq. 30, and
+outlines seen through the glass), which is what limits the inner wall.
+Measured (32x32, 8 spp, three views, 5 pyramid levels, silhouette weight 4,
+120 steps, about 50 s each on 2 cores), outer / inner wall in % of the
+height: seed 0 0.28 / 1.04, seed 1 0.55 / 0.70, seed 2 0.40 / 0.81, seed 3
+0.81 / 2.16, seed 4 1.09 / 2.97 (from 7.8 / 6.5). Weight 1: 0.46-1.26 /
+0.76-2.22; weight 8 (seed 0): 0.65 / 2.24; a grazing cosine of 0.1 (eq.
+30): no better (inner 1.30-2.76); 160 steps (seed 0): the inner wall
+drifts to 4.7%.
 """
 
 from __future__ import annotations
@@ -260,7 +262,7 @@ def _sphere_texture(height: int = 64, frequency: float = 2.5) -> mi.TensorXf:
 def hollow_scene(points: np.ndarray, resolution: int = 32,
                  views: tuple[tuple[float, float], ...] = GLASS_VIEWS[:2], max_depth: int = 8,
                  lathe_id: str = "glass", integrator: str = "lathe_prb",
-                 lighting: str = "sphere", frequency: float = 2.5) -> mi.Scene:
+                 lighting: str = "sphere", frequency: float = 2.5, crease_angle: float = 60.0) -> mi.Scene:
     """A clear glass (``dielectric``, IOR 1.5) of the polyline ``points``
     (about 2 units tall, base at z = 0) in smooth light, and one square
     camera per view ``(elevation in degrees, distance)``, looking at the
@@ -272,7 +274,15 @@ def hollow_scene(points: np.ndarray, resolution: int = 32,
     edges can be seen through it); ``"mask"``, the glass's silhouette (the
     lathe black and diffuse in front of a uniform white sphere: 0 on the
     glass, 1 elsewhere). The lathe's reference is ``proxy`` (only exact
-    integrators render it)."""
+    integrators render it). ``crease_angle``: the lathe's, 60 degrees by
+    default, so that the joints of a smooth glass's walls (up to about 50
+    degrees apart with 17 points) are shaded smoothly: a crease seen through
+    the glass moves the image discontinuously with its vertex, and
+    ``lathe_prb`` does not differentiate that (with the default 30 degrees,
+    the creases inside the bowl, seen level through the wall, made the
+    finite difference of the level view's sum with respect to an inner-wall
+    radius 1618 where the gradient gave 40; with 60 degrees -116 and
+    -37)."""
     transform = mi.ScalarTransform4f
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     middle = 0.5 * float(points[:, 1].max() + points[:, 1].min())
@@ -289,7 +299,7 @@ def hollow_scene(points: np.ndarray, resolution: int = 32,
         "type": "scene",
         "integrator": {"type": integrator, "max_depth": 1 if mask else max_depth},
         lathe_id: {"type": "lathe", "profile": profile_string(points), "kind": "polyline",
-                   "reference": "proxy", "bsdf": bsdf},
+                   "reference": "proxy", "crease_angle": crease_angle, "bsdf": bsdf},
     }
     if mask:
         # The glass's silhouette: a black lathe in front of uniform white
@@ -393,7 +403,7 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
                    learning_rate: float = 0.02, smoothness: float = 1e-3, spacing: float = 3e-3,
                    views: tuple[tuple[float, float], ...] = GLASS_VIEWS, max_depth: int = 8,
                    seed: int = 0, start_jitter: float = 0.0, levels: int = 5, frequency: float = 2.5,
-                   silhouette_weight: float = 0.0,
+                   silhouette_weight: float = 4.0,
                    report: Callable[[int, float, tuple[float, float]], None] | None = None) -> HollowResult:
     """Recover the hollow profile ``target`` (polyline, first ``n_outer``
     points the outer wall) from renders of the clear glass in ``views``
@@ -404,7 +414,9 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
     spacing regularisers of :mod:`lathe_shape.tools.inverse` decaying
     hundredfold, and after each step the projection :func:`project_hollow`
     (minimum radius 1%, minimum wall thickness 1% of the height), halving
-    the step while the profile is refused. ``report(iteration, loss,
+    the step while the profile is refused. The loss adds the silhouettes
+    of the same views (``lighting="mask"``), weighted by
+    ``silhouette_weight`` (0: the renders alone). ``report(iteration, loss,
     (outer, inner))`` is called every iteration."""
     from ..plugin.shape import scene_lathes  # needs a variant
 

@@ -289,3 +289,13 @@ def test_crease_seen_from_the_front_moves_with_its_vertex():
         assert np.abs(fd).sum() > 10.0
         assert np.corrcoef(ad, fd)[0, 1] > 0.95, index
         assert abs(ad.sum() - fd.sum()) < 0.05 * np.abs(fd).sum(), (index, ad.sum(), fd.sum())
+
+
+@pytest.mark.parametrize("props, message", [
+    ({"grazing_cosine": 1.5}, "lathe_prb: parameter 'grazing_cosine' must be in (0, 1), got 1.5"),
+    ({"grazing_cosine": 0.0}, "lathe_prb: parameter 'grazing_cosine' must be in (0, 1), got 0"),
+    ({"silhouette_spp": 0}, "lathe_prb: parameter 'silhouette_spp' must be >= 1, got 0")])
+def test_prb_parameter_errors(props, message):
+    with pytest.raises(RuntimeError, match=re.escape(message)):
+        mi.load_dict({"type": "lathe_prb", **props})
+    assert mi.load_dict({"type": "lathe_prb", "grazing_cosine": 0.1}).grazing_cosine == pytest.approx(0.1)
