@@ -23,7 +23,7 @@ lathe's outline as the camera sees it, that change is added by edge
 sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
 26-27); shadow boundaries and outlines seen through other surfaces are
 left out (their share is measured in docs/differentiable.md),
-as is a delta vertex within 0.2 cosine of grazing (eq. 30). Non-lathe
+as is a delta vertex within ``grazing_cosine`` (0.2) of grazing (eq. 30). Non-lathe
 shapes are not differentiated with respect to their geometry.
 
 Eq. 11 under differentiation (docs/method.md, eq. 25): each policy's decision
