@@ -80,7 +80,7 @@ def test_records_of_the_builtin_kinds():
     assert KINDS["bspline"].seg_stride == bspline.STRIDE == 8
     assert KINDS["sor"].leaf_stride == bspline.LEAF_STRIDE == 12
     assert KINDS["polyline"].leaf_stride is None
-    assert differentiable_kinds() == ("polyline", "bspline")
+    assert differentiable_kinds() == ("polyline", "bspline", "bezier", "catmull_rom", "quadratic")
     assert tuple(cli.profile_kinds()) == tuple(KINDS)
     with pytest.raises(ValueError, match="unknown profile kind 'zigzag'"):
         get_kind("zigzag", "test")
