@@ -104,7 +104,8 @@ def scene_lobes(scene: mi.Scene) -> tuple[bool, bool]:
 def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
                         bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool,
                         lobes: tuple[bool, bool] = (True, True),
-                        grazing_cosine: float = GRAZING_COSINE) -> tuple[mi.Vector3f, mi.Spectrum]:
+                        grazing_cosine: float = GRAZING_COSINE,
+                        stored: list | None = None) -> tuple[mi.Vector3f, mi.Spectrum]:
     """The sampled direction ``wo_world`` and a factor of primal value 1
     carrying the derivative of the sample's weight, at the attached vertex
     ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
@@ -115,7 +116,9 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     its weight follows the attached BSDF value (eq. 29). Near grazing and
     near the critical angle these derivatives are unbounded and left out
     (eq. 30). ``lobes``: whether the scene has delta lobes, and other
-    lobes (:func:`scene_lobes`); ``grazing_cosine``: eq. 30's threshold."""
+    lobes (:func:`scene_lobes`); ``grazing_cosine``: eq. 30's threshold;
+    ``stored``: a list that receives the detached values to evaluate with
+    the vertex (None: evaluated here)."""
     has_delta, has_smooth = lobes
     if not has_delta:
         value = bsdf.eval(ctx, si, si.to_local(wo_world), active)
@@ -128,7 +131,11 @@ def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInt
     only_transmission = mi.BSDFContext()
     only_transmission.type_mask = mi.BSDFFlags.DeltaTransmission
     transmitted, _ = bsdf.sample(only_transmission, dr.detach(si), 0.5, sample_2, delta & reflected)
-    dr.eval(transmitted)  # (stored, as the vertex's other detached values)
+    # (stored, as the vertex's other detached values)
+    if stored is None:
+        dr.eval(transmitted)
+    else:
+        stored.append(transmitted)
     eta_it = dr.select(reflected, transmitted.eta, bs.eta)
     fresnel = delta & dr.select(reflected, transmitted.pdf > 0.0, True) & (eta_it != 1.0)
     wi = si.wi
@@ -324,11 +331,13 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             for _ in range(max_depth):
                 if not dr.any(path.active):
                     break
-                path = self._vertex(scene, geometry, sampler, path, max_depth, True)
-                # Evaluated vertex by vertex: unevaluated, each vertex's
-                # kernel would recompute the whole path before it
+                stored: list = []  # The vertex's detached values the reverse pass reads
+                path = self._vertex(scene, geometry, sampler, path, max_depth, True, stored)
+                # Evaluated vertex by vertex, in one kernel with the values
+                # it stores: unevaluated, each vertex's kernel would
+                # recompute the whole path before it
                 sampler.schedule_state()
-                dr.eval(path)
+                dr.eval(path, stored)
             L = path.L
             if not dr.grad_enabled(L):  # no lathe seen: zero derivative
                 return mi.Spectrum(0), path.valid_ray, [], dr.detach(L)
@@ -338,11 +347,14 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             return dr.forward_to(L), path.valid_ray, [], dr.detach(L)
 
     def _vertex(self, scene: mi.Scene, geometry: ExactSceneGeometry, sampler: mi.Sampler, path: _Path,
-                max_depth: int, attached: bool) -> _Path:
+                max_depth: int, attached: bool, stored: list | None = None) -> _Path:
         """One path vertex: the hit of ``path.ray``, its emission, a light
         sample and a BSDF sample (eq. 11 as ``normal_check`` says), the
         next ray and Russian roulette. ``attached``: the vertex moves with
-        the profile (derivatives recorded, see :meth:`sample_attached`)."""
+        the profile (derivatives recorded, see :meth:`sample_attached`);
+        ``stored`` then receives the detached values (hit, samples, MIS
+        weights) that the reverse pass reads instead of recomputing them,
+        evaluated with the path state."""
         check = self.normal_check
         ctx = mi.BSDFContext()
         ray, depth, beta, eta, active = path.ray, path.depth, path.beta, path.eta, path.active
@@ -350,7 +362,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if attached:
             # Stored, so that the reverse pass reads the hit instead of
             # tracing the ray again
-            dr.eval(si)
+            stored.append(si)
             si = attach_lathe_hits(geometry.lathes, ray, si)
         si_detached = dr.detach(si)
         valid_ray = path.valid_ray | (active & si.is_valid() & (depth == 0))
@@ -380,7 +392,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         pdf_em = scene.pdf_emitter_direction(path.prev, ds, ~path.bsdf_delta_prev)
         mis = mis_weight(path.bsdf_pdf_prev, pdf_em)
         if attached:
-            dr.eval(mis)  # (as the hit)
+            stored.append(mis)  # (as the hit)
         show = active & (depth > 0) if self.hide_emitters else active
         L = path.L + beta * mis * ds.emitter.eval(si, show)
 
@@ -394,7 +406,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             active_em &= side_geo * side_sh > 0.0
         active_em &= ~geometry.ray_test(si_detached.spawn_ray_to(ds.p), active_em)
         if attached:
-            dr.eval(active_em, ds, em_weight)  # (as the hit: not traced again)
+            stored.append((active_em, ds, em_weight))  # (as the hit: not traced again)
         if attached:
             ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
         bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
@@ -421,9 +433,9 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
                 active_next &= ~bad_out
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         if attached:
-            dr.eval(bs, bsdf_weight, wo_world, sample_2, active_next)  # (as the hit)
+            stored.append((bs, bsdf_weight, wo_world, sample_2, active_next))  # (as the hit)
             wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
-                                                   self._lobes, self.grazing_cosine)
+                                                   self._lobes, self.grazing_cosine, stored)
             bsdf_weight = bsdf_weight * factor
         beta = beta * bsdf_weight
         eta = eta * bs.eta
