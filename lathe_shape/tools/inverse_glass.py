@@ -32,7 +32,7 @@ of the height on the outer wall, 3.6-4.8% on the inner). A user who has
 photographs can also segment them: ``silhouette_weight`` adds the
 silhouettes of the same views (the lathe black before white,
 ``lighting="mask"``) to the loss. Their gradient is the outline term's,
-which agrees with finite differences of the silhouette loss within 10-25%;
+which agrees with finite differences of the silhouette loss within 10-35%;
 the renders' gradient with respect to the inner wall is 2-4x smaller than
 its finite difference (grazing paths through the walls, eq. 30, and
 outlines seen through the glass), which is what limits the inner wall.
