@@ -21,10 +21,10 @@ varies along the curve. A polyline's joint circles are outline too where
 the two adjacent cones face the camera differently, and so is a crease of
 the shading normal that the camera sees (eq. 10's sharp joints: the
 radiance jumps across it, and it moves with its joint point). The outline
-pieces are material points ``(segment, u, phi)``, placed detached; their positions are
-attached to the profile points, and a tangential slide of a material point
-along the outline does not change ``n . dx``, so the point's own motion
-gives the outline's. ``f_in - f_out`` is estimated with camera rays just
+pieces are material points ``(segment, u, phi)``, placed detached; their
+positions are attached to the profile points, and a tangential slide of a
+material point along the outline does not change ``n . dx``, so the
+point's own motion gives the outline's. ``f_in - f_out`` is estimated with camera rays just
 either side of the outline (an outline hidden behind other surfaces gets
 zero difference), traced with the integrator's primal ``sample``.
 Shadows and outlines seen through other surfaces (secondary visibility) are
@@ -63,8 +63,9 @@ _DENSITY = 2.0
 class OutlineSamples:
     """Outline pieces of the lathes in one view: material points ``seg``,
     ``u``, ``phi`` and owner ``lathe`` (numpy), the detached image normal
-    ``normal`` times the image length ``dl`` (numpy, (n, 2)) and image
-    position ``x`` (numpy, (n, 2), pixels)."""
+    ``normal`` times the image length ``dl`` (numpy, (n, 2)), image
+    position ``x`` (numpy, (n, 2), pixels) and the side rays' offset
+    (numpy, (n,), pixels)."""
 
     def __init__(self) -> None:
         self.parts: list[tuple[LatheShape, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -261,14 +262,18 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
     return ds.uv, it.p
 
 
+def _unit(normal_dl: np.ndarray) -> np.ndarray:
+    """The unit image normals of the pieces ``normal_dl`` (n, 2)."""
+    return normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
+
+
 def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray, normal_dl: np.ndarray,
                    seed: int, spp: int, epsilon: np.ndarray | float = _EPSILON) -> mi.Spectrum:
     """The integrator's primal radiance (times the sensor weight, not yet
     evaluated) of camera rays at ``x - eps n`` and ``x + eps n``, ``spp``
     rounds of both."""
     width, height = sensor.film().crop_size()
-    unit = normal_dl / np.maximum(np.linalg.norm(normal_dl, axis=1, keepdims=True), 1e-30)
-    offset = np.reshape(epsilon, (-1, 1)) * unit
+    offset = np.reshape(epsilon, (-1, 1)) * _unit(normal_dl)
     positions = np.tile(np.concatenate([x - offset, x + offset]), (spp, 1))
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
@@ -343,7 +348,7 @@ def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, sp
     weight *= ~np.concatenate([np.array(mask) for mask in hidden])[:, None]
     start = 0
     for (_, seg, _, _, part_normal_dl, part_x, _), (position, _) in zip(parts, positions, strict=True):
-        unit = part_normal_dl / np.maximum(np.linalg.norm(part_normal_dl, axis=1, keepdims=True), 1e-30)
+        unit = _unit(part_normal_dl)
         speed = position.x * mi.Float(unit[:, 0].astype(np.float32)) + position.y * mi.Float(
             unit[:, 1].astype(np.float32))
         column = np.floor(part_x[:, 0]).astype(np.int64)

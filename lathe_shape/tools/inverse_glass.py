@@ -269,7 +269,7 @@ def hollow_scene(points: np.ndarray, resolution: int = 32,
     glass's middle (sensor ``k`` is view ``k``). ``lighting``: ``"sphere"``,
     an emissive sphere around everything (:func:`_sphere_texture` of
     ``frequency``); ``"envmap"``, an environment map affine in the
-    direction (shown wrongly by ``lathe_prb``, see the module docstring);
+    direction;
     ``"backdrop"``, emissive rectangles behind and below the glass (their
     edges can be seen through it); ``"mask"``, the glass's silhouette (the
     lathe black and diffuse in front of a uniform white sphere: 0 on the
@@ -447,7 +447,8 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
         mask_targets = render_views(hollow_scene(target, resolution, views, lighting="mask"), spp, seed)
         mask_scene = hollow_scene(current, resolution, views, lighting="mask")
         mask_params = mi.traverse(mask_scene)
-        written.append((mask_params, points_key(mask_params, scene_lathes(mask_scene)[0])))
+        mask_key = points_key(mask_params, scene_lathes(mask_scene)[0])
+        written.append((mask_params, mask_key))
     result.before = [np.array(image) for image in render_views(scene, spp, seed)]
     optimizer = mi.ad.Adam(lr=learning_rate)
     optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
@@ -460,7 +461,7 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
                              + spacing * _spacing(optimizer["points"]))
         loss += _multiscale_loss(render_views(scene, spp, seed, params), targets, levels)
         if silhouette_weight > 0.0:
-            mask_params[written[1][1]] = optimizer["points"]
+            mask_params[mask_key] = optimizer["points"]
             mask_params.update()
             loss += silhouette_weight * _multiscale_loss(render_views(mask_scene, spp, seed, mask_params),
                                                          mask_targets, levels)
