@@ -224,9 +224,10 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
        - Eq. 30: a Dirac-delta vertex whose incident or outgoing cosine is
          below this is not differentiated (its derivative is unbounded
          there), nor the slide along its ray of a hit reached through one
-         whose cosine is below 1.25 times this. Lower values leave out less of the derivative of paths
-         that graze a wall seen through glass, at the price of a heavier
-         tail (more variance). In (0, 1). (Default: 0.2)
+         whose cosine is below 1.25 times this. Lower values leave out
+         less of the derivative of paths that graze a wall seen through
+         glass, at the price of a heavier tail (more variance). In (0, 1).
+         (Default: 0.2)
     """
 
     plugin_name = "lathe_prb"
