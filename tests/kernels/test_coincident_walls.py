@@ -108,6 +108,9 @@ def walk_lines(geometry: ExactSceneGeometry, o: np.ndarray, d: np.ndarray, steps
     lathes, ts = [], []
     for _ in range(steps):
         si, walk = geometry.ray_intersect_walk(ray, active, walk)
+        # One kernel per step (unevaluated, every step's kernel would trace
+        # all the steps before it, and compile anew)
+        dr.eval(si, walk)
         valid = si.is_valid().numpy()
         lathes.append(np.where(valid, walk.lathe.numpy().astype(np.int64), -1))
         ts.append(np.where(valid, walk.t.numpy(), np.nan))

@@ -342,6 +342,9 @@ def test_grazing_and_total_internal_reflection_give_finite_values(light_z, pane)
     sampler.seed(3, size)
     geometry = integrator.geometry(scene)
     pos, value, splat, behind = tracer._trace(scene, geometry, sensor, sampler, size, mi.Float(1.0))
+    # In one kernel, as the integrator does (otherwise each gather below
+    # traces all the particles again for its own field)
+    dr.eval(value, splat, behind)
     value = np.array(value).T[np.array(splat)]
     lanes = dr.compress(behind[0])
     behind = tuple(dr.gather(type(field), field, lanes) for field in behind)

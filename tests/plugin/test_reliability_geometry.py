@@ -5,6 +5,7 @@ proxies, many lathes loaded in parallel and very long polylines."""
 
 from __future__ import annotations
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -31,6 +32,7 @@ def _walk_hits(geometry: ExactSceneGeometry, o, d) -> list[float]:
     walk, active, hits = start_walk(1), mi.Bool(True), []
     for _ in range(8):
         si, walk = geometry.ray_intersect_walk(ray, active, walk)
+        dr.eval(si, walk)  # one kernel per step, not all steps again
         if not si.is_valid()[0]:
             break
         hits.append(float(si.t[0]))
