@@ -4,8 +4,10 @@
 Differentiable path tracing on the exact lathe geometry of ``lathe_path``.
 The primal render is one symbolic loop, as ``lathe_path``'s. The
 differential pass (``render_forward``, ``render_backward``) traces the same
-paths again, one kernel per vertex, with every lathe hit attached to the
-lathe's ``points`` parameter by implicit differentiation
+paths again (those of the camera samples that meet a surface, compacted,
+drawing the primal render's numbers), one kernel per vertex, with every
+lathe hit attached to the lathe's ``points`` parameter by implicit
+differentiation
 (:mod:`lathe_shape.plugin.attached_hits`, docs/method.md eqs. 21-25) and
 every ray following the vertices that made it: through a Dirac-delta chain
 (a glass's four walls) the directions turn and the later vertices slide as
@@ -51,6 +53,7 @@ from .integrator_base import (
     normal_check_parameter,
     with_geometric_frame,
 )
+from .lane_sampler import lane_sampler
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
@@ -82,11 +85,29 @@ def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
 
 
+#: Emitters whose sampled weight depends on the shading point only through
+#: the solid angle of an area sample (its Jacobian) and a point light's
+#: inverse-square distance (:func:`_reattach_emitter_sample` differentiates
+#: those factors instead of evaluating the emitter again).
+PLAIN_EMITTERS = frozenset({"AreaLight", "PointLight", "EnvironmentMapEmitter", "ConstantBackgroundEmitter",
+                            "DirectionalEmitter"})
+
+
+def plain_emitters(scene: mi.Scene) -> bool:
+    """Whether every emitter of ``scene`` is one of :data:`PLAIN_EMITTERS`."""
+    return all(emitter.class_name() in PLAIN_EMITTERS for emitter in scene.emitters())
+
+
 def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: mi.DirectionSample3f,
-                             em_weight: mi.Spectrum, active: mi.Bool):
+                             em_weight: mi.Spectrum, active: mi.Bool, plain: bool = False):
     """The detached emitter sample ``ds`` and its weight, re-evaluated with
     derivatives of the (moving) shading point, as ``prb`` does (textured area
-    lights apart)."""
+    lights apart). ``plain``: every emitter is one of :data:`PLAIN_EMITTERS`
+    (:func:`plain_emitters`): a diffuse area light's radiance at the held
+    sample, an environment's in the held direction and a point light's
+    intensity do not change, so the weight's derivative is that of the
+    Jacobian and of a point light's ``1 / dist^2``, without evaluating the
+    emitter again (a call per emitter kind in the reverse pass)."""
     is_surface = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Surface)
     is_infinite = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
     to_light = ds.p - si.p
@@ -95,6 +116,10 @@ def _reattach_emitter_sample(scene: mi.Scene, si: mi.SurfaceInteraction3f, ds: m
     ds.dist = dr.replace_grad(ds.dist, dr.select(is_infinite, ds.dist, dr.norm(to_light)))
     # A moving shading point changes the solid angle of the sampled area
     J = solid_angle_to_area_jacobian(si.p, dr.detach(ds.p), dr.detach(ds.n), active & is_surface)
+    if plain:
+        point = mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.DeltaPosition)
+        falloff = dr.select(active & point, dr.rcp(dr.square(ds.dist)), 1.0)
+        return ds, em_weight * dr.relative_grad(J) * dr.relative_grad(falloff)
     em_val = scene.eval_emitter_direction(si, ds, active)
     inv_pdf = dr.select(ds.pdf != 0, dr.rcp(ds.pdf), 0)
     em_weight = dr.replace_grad(em_weight, em_val * dr.detach(inv_pdf)) * dr.relative_grad(J)
@@ -245,7 +270,10 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             raise ValueError("lathe_prb: parameter 'grazing_cosine' must be in (0, 1), "
                              f"got {self.grazing_cosine:g}")
         self._differentiating = False
+        self._seed, self._sensor = 0, None
         self._lobes = (True, True)
+        self._plain_emitters = False
+        self._hit_sampler = None  # the compacted camera hits' sampler (see _camera_hits)
 
     def prepare_geometry(self, geometry: ExactSceneGeometry) -> None:
         """The differentiable lathes' index maps, built here, outside the
@@ -259,7 +287,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if self.silhouette and geometry.lathes:
             # Before the interior pass, which consumes the parameters' tangents
             outline = outline_forward(self, scene, _sensor(scene, sensor), seed, self.silhouette_spp)
-        with self._attached_pass_only():
+        with self._attached_pass_only(seed, _sensor(scene, sensor)):
             image = super().render_forward(scene, params, sensor, seed, spp)
         if outline is not None:
             image += mi.TensorXf(outline[..., : image.shape[2]].astype(np.float32))
@@ -275,7 +303,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             camera = _sensor(scene, sensor)
             pieces = outline_samples(camera, differentiable_lathes(geometry.lathes))
             grad_image = np.array(grad_in)
-        with self._attached_pass_only():
+        with self._attached_pass_only(seed, _sensor(scene, sensor)):
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
         if outline:
             outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp, pieces)
@@ -294,14 +322,53 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         return self.sample_primal(scene, sampler, ray, active)
 
     @contextlib.contextmanager
-    def _attached_pass_only(self):
+    def _attached_pass_only(self, seed, sensor: mi.Sensor):
         """Within: the base class's render_forward/render_backward skip
-        their primal pass (see :meth:`sample`)."""
-        self._differentiating = True
+        their primal pass (see :meth:`sample`); the render's ``seed`` and
+        ``sensor`` give the attached pass's sampler (:meth:`_camera_hits`)."""
+        self._differentiating, self._seed, self._sensor = True, seed, sensor
         try:
             yield
         finally:
             self._differentiating = False
+
+    def _camera_hits(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool):
+        """The path states of the camera rays that meet a surface, one lane
+        each (compacted), their lanes among ``ray``'s, the alpha of every
+        lane, and a sampler for the compacted lanes. A camera ray that meets
+        nothing sees a constant (the environment, or nothing): its
+        derivative is zero, and the attached pass, whose per-vertex kernels
+        and reverse pass read every lane's stored values, skips it (on the
+        diffuse vase of ``bench_gradients.py``, 63% of the lanes). The
+        compacted lanes draw the numbers the sensor's ``independent``
+        sampler draws for them in the primal render
+        (:func:`~lathe_shape.plugin.lane_sampler.lane_sampler`: the gradient
+        and a finite difference of primal renders see the same paths); with
+        another sampler, from an ``independent`` sampler of their own."""
+        start = self._start(scene, geometry, ray, active)
+        with dr.suspend_grad():
+            hit = start.active & geometry.ray_intersect(start.ray, start.active, True).is_valid()
+        dr.eval(hit, start.ray)  # (one kernel: the rays are gathered below)
+        lanes = dr.compress(hit)
+        count = dr.width(lanes)
+        alpha = start.valid_ray | hit
+        if count == 0:
+            return None, lanes, alpha, None
+        camera_ray = dr.gather(mi.Ray3f, start.ray, lanes)
+        path = _Path(camera_ray, mi.UInt32(0), mi.Spectrum(0), mi.Spectrum(1), mi.Float(1),
+                     dr.full(mi.Bool, True, count), dr.zeros(mi.Interaction3f), mi.Float(1), mi.Bool(True),
+                     start.valid_ray)
+        sampler = lane_sampler(self._sensor, self._seed, lanes)
+        if sampler is None:
+            if self._hit_sampler is None:
+                self._hit_sampler = mi.load_dict({"type": "independent"})
+            sampler = self._hit_sampler
+            seed = self._seed  # (an int, or an opaque UInt32)
+            if isinstance(seed, int):
+                sampler.seed((seed * 2654435761 + 0x68E31DA4) & 0xFFFFFFFF, count)
+            else:
+                sampler.seed(mi.UInt32(seed) * 2654435761 + 0x68E31DA4, count)
+        return path, lanes, alpha, sampler
 
     def _start(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool) -> _Path:
         """The path state of the camera ray ``ray``."""
@@ -337,9 +404,14 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
         geometry = self.geometry(scene)
         self._lobes = scene_lobes(scene)
+        self._plain_emitters = plain_emitters(scene)
         max_depth = min(self.max_depth, MAX_DIFFERENTIAL_DEPTH)
+        width = dr.width(ray)
+        path, lanes, alpha, sampler = self._camera_hits(scene, geometry, ray, active)
+        nothing = dr.zeros(mi.Spectrum, width)
+        if path is None:  # nothing seen: zero derivative
+            return nothing, alpha, [], nothing
         with dr.resume_grad():
-            path = self._start(scene, geometry, ray, active)
             for _ in range(max_depth):
                 if not dr.any(path.active):
                     break
@@ -350,13 +422,18 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
                 # recompute the whole path before it
                 sampler.schedule_state()
                 dr.eval(path, stored)
+            # (the fourth output, the primal radiance, is read by no caller:
+            # zero, not scattered back)
             L = path.L
             if not dr.grad_enabled(L):  # no lathe seen: zero derivative
-                return mi.Spectrum(0), path.valid_ray, [], dr.detach(L)
+                return nothing, alpha, [], nothing
             if mode == dr.ADMode.Backward:
-                dr.backward_from(δL * L)
-                return mi.Spectrum(0), path.valid_ray, [], dr.detach(L)
-            return dr.forward_to(L), path.valid_ray, [], dr.detach(L)
+                dr.backward_from(dr.gather(mi.Spectrum, δL, lanes) * L)
+                return nothing, alpha, [], nothing
+            derivative = dr.zeros(mi.Spectrum, width)
+            dr.scatter(derivative, dr.forward_to(L), lanes)
+            dr.eval(derivative)  # (a scatter's target: evaluated before another kernel reads it)
+            return derivative, alpha, [], nothing
 
     def _vertex(self, scene: mi.Scene, geometry: ExactSceneGeometry, sampler: mi.Sampler, path: _Path,
                 max_depth: int, attached: bool, stored: list | None = None) -> _Path:
@@ -372,9 +449,11 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         ray, depth, beta, eta, active = path.ray, path.depth, path.beta, path.eta, path.active
         si = geometry.ray_intersect(ray, active, depth == 0)
         if attached:
-            # Stored, so that the reverse pass reads the hit instead of
-            # tracing the ray again
-            stored.append(si)
+            if not dr.grad_enabled(ray):
+                # Stored, so that the reverse pass reads the hit instead of
+                # tracing the ray again (a moving ray's hit is stored by
+                # ray_intersect)
+                stored.append(si)
             si = attach_lathe_hits(geometry.lathes, ray, si)
         si_detached = dr.detach(si)
         valid_ray = path.valid_ray | (active & si.is_valid() & (depth == 0))
@@ -421,7 +500,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if attached:
             stored.append((active_em, ds, em_weight))  # (as the hit: not traced again)
         if attached:
-            ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em)
+            ds, em_weight = _reattach_emitter_sample(scene, si, ds, em_weight, active_em,
+                                                     self._plain_emitters)
         bsdf_val_em, bsdf_pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), active_em)
         mis_em = dr.select(ds.delta, 1, mis_weight(ds.pdf, dr.detach(bsdf_pdf_em)))
         L += dr.select(active_em, beta * mis_em * bsdf_val_em * em_weight, 0)

@@ -299,3 +299,58 @@ def test_prb_parameter_errors(props, message):
     with pytest.raises(RuntimeError, match=re.escape(message)):
         mi.load_dict({"type": "lathe_prb", **props})
     assert mi.load_dict({"type": "lathe_prb", "grazing_cosine": 0.1}).grazing_cosine == pytest.approx(0.1)
+
+
+# -- the differential pass's compacted lanes -------------------------------------
+
+@pytest.mark.parametrize("seed", [0, 7])
+def test_compacted_lanes_draw_the_primal_numbers(seed):
+    """The differential pass keeps only the camera samples that meet a
+    surface; their sampler (lane_sampler) draws, lane for lane, what the
+    sensor's independent sampler draws after the camera sample."""
+    from lathe_shape.plugin.lane_sampler import camera_draws, lane_sampler
+
+    scene = lathe_scene(resolution=8)
+    sensor = scene.sensors()[0]
+    sampler = sensor.sampler().clone()
+    sampler.set_samples_per_wavefront(4)
+    sampler.seed(seed, 8 * 8 * 4)
+    for _ in range(camera_draws(sensor)):
+        sampler.next_1d()
+    expected = np.array([np.array(sampler.next_1d()) for _ in range(5)])
+    lanes = np.array([0, 3, 17, 100, 255])
+    mine = lane_sampler(sensor, seed, mi.UInt32(lanes))
+    drawn = np.array([np.array(mine.next_1d()) for _ in range(5)])
+    np.testing.assert_array_equal(drawn, expected[:, lanes])
+    assert lane_sampler(mi.load_dict({"type": "perspective", "sampler": {"type": "stratified"}}), seed,
+                        mi.UInt32(lanes)) is None
+
+
+@pytest.mark.slow
+def test_other_samplers_still_differentiate():
+    """With a sampler other than independent, the compacted lanes draw from
+    a sampler of their own (unpaired): forward and backward mode still
+    agree, and the gradient agrees with the paired one within the noise."""
+    gradients = {}
+    for kind in ("independent", "stratified"):
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "lathe_prb", "max_depth": 2},
+            "lathe": {"type": "lathe", "profile": DEFAULT_PROFILE, "bsdf": {"type": "diffuse"}},
+            "light": {"type": "point", "position": [2.0, -2.0, 3.0],
+                      "intensity": {"type": "rgb", "value": 20.0}},
+            "camera": {"type": "perspective", "fov": 35,
+                       "to_world": mi.ScalarTransform4f().look_at([3, 0.5, 2.5], [0, 0, 0.6], [0, 0, 1]),
+                       "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}},
+                       "sampler": {"type": kind, "sample_count": 64}}})
+        params, key = _points_params(scene)
+        value = params[key]
+        dr.enable_grad(value)
+        params.update()
+        weights = mi.TensorXf(np.ones((24, 24, 3), dtype=np.float32))
+        scene.integrator().render_backward(scene, params, weights, seed=5)
+        gradients[kind] = np.array(dr.grad(value))
+        dr.disable_grad(value)
+        forward = forward_gradient(scene, key, 6, spp=64, seed=5).sum()
+        np.testing.assert_allclose(gradients[kind][6], forward, rtol=1e-3, atol=1e-4)
+    scale = np.abs(gradients["independent"]).max()
+    np.testing.assert_allclose(gradients["stratified"], gradients["independent"], atol=0.05 * scale)
