@@ -19,7 +19,7 @@ import re
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["LaneSampler", "camera_draws", "lane_sampler"]
+__all__ = ["LaneSampler", "camera_draws", "lane_sampler", "unpaired_lane_sampler"]
 
 
 class LaneSampler:
@@ -38,6 +38,13 @@ class LaneSampler:
 
     def schedule_state(self) -> None:
         dr.schedule(self.rng.state, self.rng.inc)
+
+    def take(self, lanes: mi.UInt32) -> LaneSampler:
+        """The sampler of the lanes ``lanes`` alone (each keeps its stream)."""
+        rng = mi.PCG32(self.rng)
+        rng.state = dr.gather(mi.UInt64, self.rng.state, lanes)
+        rng.inc = dr.gather(mi.UInt64, self.rng.inc, lanes)
+        return LaneSampler(rng)
 
 
 def camera_draws(sensor: mi.Sensor) -> int:
@@ -76,4 +83,18 @@ def lane_sampler(sensor: mi.Sensor, seed: int | mi.UInt32, lanes: mi.UInt32) -> 
     rng.seed(mi.UInt64(initstate), mi.UInt64(initseq))
     for _ in range(camera_draws(sensor)):
         rng.next_float32()
+    return LaneSampler(rng)
+
+
+def unpaired_lane_sampler(seed: int | mi.UInt32, count: int) -> LaneSampler:
+    """``count`` lanes of an ``independent`` stream of their own, seeded from
+    ``seed`` (scrambled, so that it differs from the render's)."""
+    if isinstance(seed, int):
+        seed_value = dr.opaque(mi.UInt32, (seed * 2654435761 + 0x68E31DA4) & 0xFFFFFFFF)
+    else:
+        seed_value = mi.UInt32(seed) * 2654435761 + 0x68E31DA4
+        dr.make_opaque(seed_value)
+    initstate, initseq = mi.sample_tea_32(seed_value, dr.arange(mi.UInt32, count))
+    rng = mi.PCG32(count)
+    rng.seed(mi.UInt64(initstate), mi.UInt64(initseq))
     return LaneSampler(rng)

@@ -4,8 +4,9 @@
 Differentiable path tracing on the exact lathe geometry of ``lathe_path``.
 The primal render is one symbolic loop, as ``lathe_path``'s. The
 differential pass (``render_forward``, ``render_backward``) traces the same
-paths again (those of the camera samples that meet a surface, compacted,
-drawing the primal render's numbers), one kernel per vertex, with every
+paths again (those of the camera samples that meet a surface, the ended
+paths dropped after every vertex, drawing the primal render's numbers),
+one kernel per vertex, with every
 lathe hit attached to the lathe's ``points`` parameter by implicit
 differentiation
 (:mod:`lathe_shape.plugin.attached_hits`, docs/method.md eqs. 21-25) and
@@ -53,7 +54,7 @@ from .integrator_base import (
     normal_check_parameter,
     with_geometric_frame,
 )
-from .lane_sampler import lane_sampler
+from .lane_sampler import lane_sampler, unpaired_lane_sampler
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
@@ -273,7 +274,6 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         self._seed, self._sensor = 0, None
         self._lobes = (True, True)
         self._plain_emitters = False
-        self._hit_sampler = None  # the compacted camera hits' sampler (see _camera_hits)
 
     def prepare_geometry(self, geometry: ExactSceneGeometry) -> None:
         """The differentiable lathes' index maps, built here, outside the
@@ -360,14 +360,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
                      start.valid_ray)
         sampler = lane_sampler(self._sensor, self._seed, lanes)
         if sampler is None:
-            if self._hit_sampler is None:
-                self._hit_sampler = mi.load_dict({"type": "independent"})
-            sampler = self._hit_sampler
-            seed = self._seed  # (an int, or an opaque UInt32)
-            if isinstance(seed, int):
-                sampler.seed((seed * 2654435761 + 0x68E31DA4) & 0xFFFFFFFF, count)
-            else:
-                sampler.seed(mi.UInt32(seed) * 2654435761 + 0x68E31DA4, count)
+            sampler = unpaired_lane_sampler(self._seed, count)
         return path, lanes, alpha, sampler
 
     def _start(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool) -> _Path:
@@ -399,9 +392,11 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         the primal render traced again with every lathe vertex attached to
         the profile and every ray following the vertices that made it, so
         that a Dirac-delta chain (glass walls, mirrors) turns and slides as
-        the profile moves. One kernel per vertex; Dr.Jit's AD graph then
-        holds every vertex for the reverse pass (memory grows with the path
-        length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
+        the profile moves. Only the camera samples that meet a surface
+        (:meth:`_camera_hits`), and after every vertex only the paths that
+        go on (:meth:`_compact`). One kernel per vertex; Dr.Jit's AD graph
+        then holds every vertex for the reverse pass (memory grows with the
+        path length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
         geometry = self.geometry(scene)
         self._lobes = scene_lobes(scene)
         self._plain_emitters = plain_emitters(scene)
@@ -412,9 +407,10 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if path is None:  # nothing seen: zero derivative
             return nothing, alpha, [], nothing
         with dr.resume_grad():
+            count = dr.width(lanes)
+            index = dr.arange(mi.UInt32, count)  # Each path's lane among the camera hits
+            L = dr.zeros(mi.Spectrum, count)     # The radiance of the paths that ended
             for _ in range(max_depth):
-                if not dr.any(path.active):
-                    break
                 stored: list = []  # The vertex's detached values the reverse pass reads
                 path = self._vertex(scene, geometry, sampler, path, max_depth, True, stored)
                 # Evaluated vertex by vertex, in one kernel with the values
@@ -422,9 +418,20 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
                 # recompute the whole path before it
                 sampler.schedule_state()
                 dr.eval(path, stored)
+                going = int(dr.count(path.active)[0])
+                if going == 0:
+                    break
+                # The paths that ended leave (their radiance is final); the
+                # others go on alone. At every vertex, even where none
+                # ended: the reverse pass then has one kernel per vertex, the
+                # same code every render (compacting only where many ended
+                # grouped the vertices differently from render to render,
+                # and each grouping compiled its own reverse kernels)
+                path, index, sampler, L = self._compact(path, index, sampler, L, going)
+            dr.scatter(L, path.L, index)  # (the paths left)
+            dr.eval(L)  # (a scatter's target: evaluated before another kernel reads it)
             # (the fourth output, the primal radiance, is read by no caller:
             # zero, not scattered back)
-            L = path.L
             if not dr.grad_enabled(L):  # no lathe seen: zero derivative
                 return nothing, alpha, [], nothing
             if mode == dr.ADMode.Backward:
@@ -434,6 +441,27 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             dr.scatter(derivative, dr.forward_to(L), lanes)
             dr.eval(derivative)  # (a scatter's target: evaluated before another kernel reads it)
             return derivative, alpha, [], nothing
+
+    @staticmethod
+    def _compact(path: _Path, index: mi.UInt32, sampler, L: mi.Spectrum, going: int):
+        """The paths of ``path`` that go on, alone (their lanes among the
+        camera hits, ``index``, and their samplers' states gathered), after
+        the radiance of those that ended is scattered to their lanes of
+        ``L``."""
+        dr.scatter(L, path.L, index, ~path.active)
+        dr.eval(L)
+        keep = dr.compress(path.active)
+        fields, width = {}, dr.width(path.active)
+        for field in dataclasses.fields(path):
+            value = getattr(path, field.name)
+            if field.name == "active":
+                value = dr.full(mi.Bool, True, going)
+            elif dr.width(value) == width and width > 1:  # (not a value every lane shares)
+                # (each lane once: a permutation in the reverse pass,
+                # whatever the sizes)
+                value = dr.gather(type(value), value, keep, mode=dr.ReduceMode.Permute)
+            fields[field.name] = value
+        return _Path(**fields), dr.gather(mi.UInt32, index, keep), sampler.take(keep), L
 
     def _vertex(self, scene: mi.Scene, geometry: ExactSceneGeometry, sampler: mi.Sampler, path: _Path,
                 max_depth: int, attached: bool, stored: list | None = None) -> _Path:
