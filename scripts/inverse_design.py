@@ -14,14 +14,16 @@ after images of every view to -o/--output.
 inside a smooth coloured emissive sphere, seen level, from above and from
 below, starting from a hollow cylinder, from the three renders and their
 silhouettes (the glass black before white: what segmenting the photographs
-gives; ``--silhouette-weight`` weighs their loss, 0 leaves them out); it
-prints the outer and the inner wall's RMS errors per iteration (defaults
-there: 120 iterations, 32x32, 8 spp, step 0.02, smoothness 1e-3,
-silhouette weight 4).
+gives; ``--silhouette-weight`` weighs their loss, 0 leaves them out),
+taking back a step that raised the image loss above ``1 + --uphill``
+times the lowest so far; it prints the outer and the inner wall's RMS
+errors per iteration (defaults there: 120 iterations, 32x32, 8 spp, step
+0.02, smoothness 1e-3, silhouette weight 4, uphill 0.1).
 
     python scripts/inverse_design.py [--kind polyline|bspline|hollow] [--iterations 60] [--resolution 32x32]
                                      [--spp 16] [--learning-rate 0.02] [--smoothness 3e-3]
-                                     [--spacing 3e-3] [--silhouette-weight 4] [--seed 0] [-o inverse_out]
+                                     [--spacing 3e-3] [--silhouette-weight 4] [--uphill 0.1] [--seed 0]
+                                     [-o inverse_out]
                                      [--variant llvm_ad_rgb]
 
 The views are square: ``--resolution`` is ``NxN`` or ``N``.
@@ -30,6 +32,7 @@ The views are square: ``--resolution`` is ``NxN`` or ``N``.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -68,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--silhouette-weight", type=float, default=4.0,
                         help="hollow only: weight of the silhouettes' loss against the renders' (default: 4; "
                              "0: the renders alone)")
+    parser.add_argument("--uphill", type=float, default=0.1,
+                        help="hollow only: a step that raises the image loss above (1 + this) times the "
+                             "lowest so far is taken back (default: 0.1; a negative value: never)")
     add_output_option(parser, default="inverse_out",
                       what="convergence.png and view_K_{target,before,after}.png")
     return parser
@@ -94,7 +100,8 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     target, n_outer = HIDDEN_HOLLOW["wine_glass"]
     result = recover_hollow(target, n_outer, args.iterations, side, args.spp, args.learning_rate,
                             args.smoothness, args.spacing, seed=args.seed,
-                            silhouette_weight=args.silhouette_weight, report=report)
+                            silhouette_weight=args.silhouette_weight,
+                            uphill=None if args.uphill < 0.0 else args.uphill, report=report)
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
                             f"hollow wine glass: {side}x{side}, {args.spp} spp, three views")
     paths = write_result_images(result, out)
@@ -120,6 +127,8 @@ def inverse_design(args: argparse.Namespace) -> int:
     check_at_least("--iterations", args.iterations, 1)
     if not args.silhouette_weight >= 0.0:
         raise CliError(f"--silhouette-weight must be >= 0, got {args.silhouette_weight:g}")
+    if not math.isfinite(args.uphill):
+        raise CliError(f"--uphill must be finite, got {args.uphill:g}")
     check_at_least("--spp", args.spp, 1)
     side = square_resolution(args.resolution)
     select_variant(args.variant)

@@ -39,6 +39,10 @@ def test_inverse_design_output_and_resolution(tmp_path, capsys):
                          "--variant", VARIANT])
     assert code == 2
     assert capsys.readouterr().err == "inverse_design.py: error: --silhouette-weight must be >= 0, got -1\n"
+    code = inverse.main(["--kind", "hollow", "--uphill", "nan", "-o", str(tmp_path / "no"),
+                         "--variant", VARIANT])
+    assert code == 2
+    assert capsys.readouterr().err == "inverse_design.py: error: --uphill must be finite, got nan\n"
     assert not (tmp_path / "no").exists()
     out = tmp_path / "out"
     code = inverse.main(["--iterations", "1", "--resolution", "8", "--spp", "1", "-o", str(out),
