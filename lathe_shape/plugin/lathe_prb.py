@@ -336,8 +336,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         """The path states of the camera rays that meet a surface, one lane
         each (compacted), their lanes among ``ray``'s, the alpha of every
         lane, and a sampler for the compacted lanes. A camera ray that meets
-        nothing sees a constant (the environment, or nothing): its
-        derivative is zero, and the attached pass, whose per-vertex kernels
+        nothing and sees no environment has a zero derivative, and the
+        attached pass, whose per-vertex kernels
         and reverse pass read every lane's stored values, skips it (on the
         diffuse vase of ``bench_gradients.py``, 63% of the lanes). The
         compacted lanes draw the numbers the sensor's ``independent``
@@ -348,8 +348,11 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         start = self._start(scene, geometry, ray, active)
         with dr.suspend_grad():
             hit = start.active & geometry.ray_intersect(start.ray, start.active, True).is_valid()
-        dr.eval(hit, start.ray)  # (one kernel: the rays are gathered below)
-        lanes = dr.compress(hit)
+        # (a visible environment's own parameters are differentiated where
+        # a camera ray sees it: those lanes are kept too)
+        kept = hit | (start.active & start.valid_ray)
+        dr.eval(kept, hit, start.ray)  # (one kernel: the rays are gathered below)
+        lanes = dr.compress(kept)
         count = dr.width(lanes)
         alpha = start.valid_ray | hit
         if count == 0:
