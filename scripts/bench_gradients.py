@@ -30,14 +30,14 @@ def main(argv: list[str] | None = None) -> None:
     width, height = args.size
     if height != width:
         raise SystemExit("bench_gradients.py: --resolution must be square (WxW)")
+    primal = {"type": "lathe_path", "max_depth": args.max_depth}
     if args.kind == "glass":
         wine_glass = Path(__file__).resolve().parent.parent / "scenes" / "wine_glass.csv"
         scene = glass_scene(str(wine_glass), resolution=width, max_depth=args.max_depth)
+        # glass_scene's lathe_prb has no Russian roulette: nor has the primal
+        primal["rr_depth"] = args.max_depth
     else:
         scene = lathe_scene(kind=args.kind, resolution=width, max_depth=args.max_depth)
-    primal = {"type": "lathe_path", "max_depth": args.max_depth}
-    if args.kind == "glass":  # glass_scene's lathe_prb has no Russian roulette: nor has the primal
-        primal["rr_depth"] = args.max_depth
     primal = mi.load_dict(primal)
     times = gradient_times(scene, primal, args.spp, args.repeat, args.seed)
     medians = {}

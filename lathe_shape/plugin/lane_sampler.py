@@ -1,7 +1,9 @@
 """Random numbers for a compacted subset of a render's sample lanes.
 
 ``lathe_prb``'s differential pass keeps only the camera samples whose ray
-meets a surface (:meth:`LathePRBIntegrator._camera_hits`). Its paths should
+meets a surface or sees the environment
+(:meth:`LathePRBIntegrator._camera_hits`), and after every vertex only the
+paths that go on (:meth:`LaneSampler.take`). Its paths should
 draw the numbers the primal render draws for the same samples: a gradient
 then differentiates exactly the estimate a finite difference of two primal
 renders compares (paired sampling; unpaired, the per-pixel agreement of the
@@ -65,6 +67,21 @@ def _base_seed(sampler: mi.Sampler) -> int | None:
     return int(found.group(1)) if found else None
 
 
+def _streams(seed, offset: int, lanes: mi.UInt32) -> LaneSampler:
+    """One PCG32 per lane of ``lanes``, seeded as ``independent`` seeds its
+    wavefront: the scrambled ``seed + offset`` (an int, or a UInt32; opaque,
+    so that one kernel serves all seeds) and the lane's index."""
+    if isinstance(seed, int):
+        seed_value = dr.opaque(mi.UInt32, (seed + offset) & 0xFFFFFFFF)
+    else:
+        seed_value = mi.UInt32(seed) + offset
+        dr.make_opaque(seed_value)
+    initstate, initseq = mi.sample_tea_32(seed_value, lanes)
+    rng = mi.PCG32(dr.width(lanes))
+    rng.seed(mi.UInt64(initstate), mi.UInt64(initseq))
+    return LaneSampler(rng)
+
+
 def lane_sampler(sensor: mi.Sensor, seed: int | mi.UInt32, lanes: mi.UInt32) -> LaneSampler | None:
     """A sampler for the wavefront lanes ``lanes`` of a render of ``sensor``
     with ``seed`` that draws what the sensor's ``independent`` sampler
@@ -72,29 +89,18 @@ def lane_sampler(sensor: mi.Sensor, seed: int | mi.UInt32, lanes: mi.UInt32) -> 
     base = _base_seed(sensor.sampler())
     if base is None:
         return None
-    if isinstance(seed, int):
-        # (opaque, not a literal: one kernel for all seeds)
-        seed_value = dr.opaque(mi.UInt32, (base + seed) & 0xFFFFFFFF)
-    else:
-        seed_value = mi.UInt32(base) + mi.UInt32(seed)
-        dr.make_opaque(seed_value)
-    initstate, initseq = mi.sample_tea_32(seed_value, lanes)
-    rng = mi.PCG32(dr.width(lanes))
-    rng.seed(mi.UInt64(initstate), mi.UInt64(initseq))
+    sampler = _streams(seed, base, lanes)
     for _ in range(camera_draws(sensor)):
-        rng.next_float32()
-    return LaneSampler(rng)
+        sampler.rng.next_float32()
+    return sampler
+
+
+#: Added to the render's seed for :func:`unpaired_lane_sampler`'s streams.
+UNPAIRED_OFFSET = 0x68E31DA4
 
 
 def unpaired_lane_sampler(seed: int | mi.UInt32, count: int) -> LaneSampler:
     """``count`` lanes of an ``independent`` stream of their own, seeded from
-    ``seed`` (scrambled, so that it differs from the render's)."""
-    if isinstance(seed, int):
-        seed_value = dr.opaque(mi.UInt32, (seed * 2654435761 + 0x68E31DA4) & 0xFFFFFFFF)
-    else:
-        seed_value = mi.UInt32(seed) * 2654435761 + 0x68E31DA4
-        dr.make_opaque(seed_value)
-    initstate, initseq = mi.sample_tea_32(seed_value, dr.arange(mi.UInt32, count))
-    rng = mi.PCG32(count)
-    rng.seed(mi.UInt64(initstate), mi.UInt64(initseq))
-    return LaneSampler(rng)
+    ``seed`` plus :data:`UNPAIRED_OFFSET` (so that it differs from the
+    render's)."""
+    return _streams(seed, UNPAIRED_OFFSET, dr.arange(mi.UInt32, count))

@@ -4,11 +4,10 @@
 Differentiable path tracing on the exact lathe geometry of ``lathe_path``.
 The primal render is one symbolic loop, as ``lathe_path``'s. The
 differential pass (``render_forward``, ``render_backward``) traces the same
-paths again (those of the camera samples that meet a surface, the ended
-paths dropped after every vertex, drawing the primal render's numbers),
-one kernel per vertex, with every
-lathe hit attached to the lathe's ``points`` parameter by implicit
-differentiation
+paths again (those of the camera samples that meet a surface or see the
+environment, the ended paths dropped after every vertex, drawing the
+primal render's numbers), one kernel per vertex, with every lathe hit
+attached to the lathe's ``points`` parameter by implicit differentiation
 (:mod:`lathe_shape.plugin.attached_hits`, docs/method.md eqs. 21-25) and
 every ray following the vertices that made it: through a Dirac-delta chain
 (a glass's four walls) the directions turn and the later vertices slide as
@@ -333,12 +332,12 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             self._differentiating = False
 
     def _camera_hits(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool):
-        """The path states of the camera rays that meet a surface, one lane
-        each (compacted), their lanes among ``ray``'s, the alpha of every
-        lane, and a sampler for the compacted lanes. A camera ray that meets
-        nothing and sees no environment has a zero derivative, and the
-        attached pass, whose per-vertex kernels
-        and reverse pass read every lane's stored values, skips it (on the
+        """The path states of the camera rays that meet a surface or see the
+        environment, one lane each (compacted), their lanes among ``ray``'s,
+        the alpha of every lane, and a sampler for the compacted lanes. A
+        camera ray that meets nothing and sees no environment has a zero
+        derivative, and the attached pass, whose per-vertex kernels and
+        reverse pass read every lane's stored values, skips it (on the
         diffuse vase of ``bench_gradients.py``, 63% of the lanes). The
         compacted lanes draw the numbers the sensor's ``independent``
         sampler draws for them in the primal render
@@ -357,10 +356,9 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         alpha = start.valid_ray | hit
         if count == 0:
             return None, lanes, alpha, None
-        camera_ray = dr.gather(mi.Ray3f, start.ray, lanes)
-        path = _Path(camera_ray, mi.UInt32(0), mi.Spectrum(0), mi.Spectrum(1), mi.Float(1),
-                     dr.full(mi.Bool, True, count), dr.zeros(mi.Interaction3f), mi.Float(1), mi.Bool(True),
-                     start.valid_ray)
+        # (the start's other fields are values every lane shares)
+        path = dataclasses.replace(start, ray=dr.gather(mi.Ray3f, start.ray, lanes),
+                                   active=dr.full(mi.Bool, True, count))
         sampler = lane_sampler(self._sensor, self._seed, lanes)
         if sampler is None:
             sampler = unpaired_lane_sampler(self._seed, count)
@@ -395,11 +393,12 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         the primal render traced again with every lathe vertex attached to
         the profile and every ray following the vertices that made it, so
         that a Dirac-delta chain (glass walls, mirrors) turns and slides as
-        the profile moves. Only the camera samples that meet a surface
-        (:meth:`_camera_hits`), and after every vertex only the paths that
-        go on (:meth:`_compact`). One kernel per vertex; Dr.Jit's AD graph
-        then holds every vertex for the reverse pass (memory grows with the
-        path length, up to :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
+        the profile moves. Only the camera samples that meet a surface or
+        see the environment (:meth:`_camera_hits`), and after every vertex
+        only the paths that go on (:meth:`_compact`). One kernel per
+        vertex; Dr.Jit's AD graph then holds every vertex for the reverse
+        pass (memory grows with the path length, up to
+        :data:`MAX_DIFFERENTIAL_DEPTH` vertices)."""
         geometry = self.geometry(scene)
         self._lobes = scene_lobes(scene)
         self._plain_emitters = plain_emitters(scene)

@@ -467,6 +467,14 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
     optimizer = mi.ad.Adam(lr=learning_rate)
     optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
     best_loss, best_points, step_scale = math.inf, current, 1.0  # (the uphill guard)
+
+    def record(iteration: int, loss: float) -> None:
+        result.losses.append(loss)
+        result.errors.append(wall_rms_errors(current, target, n_outer))
+        result.valid.append(hollow_valid(current, n_outer, min_thickness))
+        if report is not None:
+            report(iteration, loss, result.errors[-1])
+
     for iteration in range(iterations):
         decay = 0.1 ** (iteration / max(iterations - 1, 1))
         optimizer.set_learning_rate(learning_rate * decay * step_scale)
@@ -488,11 +496,7 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
             current = best_points
             optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
             optimizer.reset("points")
-            result.losses.append(value)
-            result.errors.append(wall_rms_errors(current, target, n_outer))
-            result.valid.append(hollow_valid(current, n_outer, min_thickness))
-            if report is not None:
-                report(iteration, value, result.errors[-1])
+            record(iteration, value)
             continue
         if value < best_loss:
             best_loss, best_points = value, current
@@ -509,11 +513,7 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
                 break
         current = np.array(params[key], dtype=np.float64).reshape(-1, 2)
         optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
-        result.losses.append(value)
-        result.errors.append(wall_rms_errors(current, target, n_outer))
-        result.valid.append(hollow_valid(current, n_outer, min_thickness))
-        if report is not None:
-            report(iteration, result.losses[-1], result.errors[-1])
+        record(iteration, value)
     result.points = current
     result.targets = [np.array(image) for image in targets]
     result.after = [np.array(image) for image in render_views(scene, spp, seed)]
