@@ -322,30 +322,33 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
                 environment = (caustic & ~valid & mi.has_flag(flags, mi.EmitterFlags.Infinite)
                                & ~mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
-                p_select = tracer.light_selection(ds.emitter)
-                density_surface = tracer.light_density(
-                    p_select, si.shape.pdf_position(ds, surface), dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
-                density_environment = tracer.environment_density(
-                    p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
-                light_density = dr.select(environment, density_environment, density_surface)
-                light_density *= per_camera_sample
                 both = surface | environment
-                # Eq. 40: through a camera chain, the light tracer samples
-                # this path only if the solver from D finds this very chain
-                limit = dr.minimum(tracer.max_chain, tracer.max_vertices - caustic_chain)
-                # (only where the light sends particles: not a uniform sky)
-                solution = solve_camera_chain(geometry, tracer.camera._origin, d_p, d_n, d_shape, limit,
-                                              both & d_through & (light_density > 0.0)
-                                              & (tracer.chain_share > 0.0))
-                same = (solution.found & (solution.vertices == d_vertices)
-                        & (dr.norm(solution.d - camera_d) < SAME_SOLUTION))
-                light_density = dr.select(d_through, dr.select(same, tracer.chain_share * light_density, 0.0),
-                                          light_density)
-                density = dr.select(d_through, caustic_density * camera_branch
-                                    * tracer.camera.direction_density(camera_d)
-                                    / solution.area_per_solid_angle, caustic_density)
-                weight = caustic_weight(density, light_density)
-                mis_bsdf = dr.select(both, mis_bsdf * weight, mis_bsdf)
+                # (a symbolic branch: the packets of lanes without such a
+                # path skip the densities and the camera chain's solve)
+                if both:
+                    p_select = tracer.light_selection(ds.emitter)
+                    density_surface = tracer.light_density(
+                        p_select, si.shape.pdf_position(ds, surface), dr.dot(si.sh_frame.n, ray.d), si.p,
+                        -ray.d)
+                    density_environment = tracer.environment_density(
+                        p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
+                    light_density = dr.select(environment, density_environment, density_surface)
+                    light_density *= per_camera_sample
+                    # Eq. 40: through a camera chain, the light tracer samples
+                    # this path only if the solver from D finds this very chain
+                    limit = dr.minimum(tracer.max_chain, tracer.max_vertices - caustic_chain)
+                    # (only where the light sends particles: not a uniform sky)
+                    solution = solve_camera_chain(geometry, tracer.camera._origin, d_p, d_n, d_shape, limit,
+                                                  both & d_through & (light_density > 0.0)
+                                                  & (tracer.chain_share > 0.0))
+                    same = (solution.found & (solution.vertices == d_vertices)
+                            & (dr.norm(solution.d - camera_d) < SAME_SOLUTION))
+                    chain_density = dr.select(same, tracer.chain_share * light_density, 0.0)
+                    light_density = dr.select(d_through, chain_density, light_density)
+                    density = dr.select(d_through, caustic_density * camera_branch
+                                        * tracer.camera.direction_density(camera_d)
+                                        / solution.area_per_solid_angle, caustic_density)
+                    mis_bsdf *= caustic_weight(density, light_density)
             emitted = ds.emitter.eval(si, active)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
@@ -421,28 +424,33 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 # with a smooth lobe; the chain after it only Dirac deltas.
                 # Eq. 40: or the first such hit after Dirac deltas that took
                 # the camera chain's branches
-                first = depth == 0
                 delta_here = pure_delta(bsdf)
-                at_d = (camera_chain & (depth <= tracer.max_chain) & active_next & ~bad_in & ~delta_here
-                        & ~on_lathe(tracer.lathes, si)
-                        & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0)
-                        & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
-                # (through a chain, the camera's part follows at the light)
-                density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
-                             / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
-                caustic_density = dr.select(at_d, density_d, caustic_density)
+                at_d = mi.Bool(False)
+                # (a symbolic branch: the packets whose paths all left
+                # their camera chain skip it)
+                if camera_chain:
+                    first = depth == 0
+                    at_d = (camera_chain & (depth <= tracer.max_chain) & active_next & ~bad_in & ~delta_here
+                            & ~on_lathe(tracer.lathes, si)
+                            & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0)
+                            & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
+                    # (through a chain, the camera's part follows at the light)
+                    density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
+                                 / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
+                    caustic_density = dr.select(at_d, density_d, caustic_density)
+                    through_d = at_d & ~first
+                    d_through = dr.select(at_d, ~first, d_through)
+                    d_vertices = dr.select(through_d, depth, d_vertices)
+                    d_p = dr.select(through_d, si.p, d_p)
+                    d_n = dr.select(through_d, si.n, d_n)
+                    d_shape = dr.select(through_d, si.shape, d_shape)
+                    # (bad_in, redrawn: the fallback policy changed the frame)
+                    camera_chain &= (delta_here & ~bad_in & ~redrawn
+                                     & chain_vertex(si, cos_in_geo, bs, wo_world))
+                    # (the chain before D only: the deltas after it cancel in eq. 32)
+                    camera_branch = dr.select(camera_chain, camera_branch * bs.pdf, camera_branch)
                 caustic_open = at_d | (caustic_open & delta_here)
                 caustic_chain = dr.select(at_d, 0, caustic_chain + 1)
-                through_d = at_d & ~first
-                d_through = dr.select(at_d, ~first, d_through)
-                d_vertices[through_d] = depth
-                d_p[through_d] = si.p
-                d_n[through_d] = si.n
-                d_shape[through_d] = si.shape
-                # (bad_in, redrawn: the fallback policy changed the frame)
-                camera_chain &= delta_here & ~bad_in & ~redrawn & chain_vertex(si, cos_in_geo, bs, wo_world)
-                # (the chain before D only: the deltas after it cancel in eq. 32)
-                camera_branch[camera_chain] *= bs.pdf
 
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
