@@ -47,7 +47,7 @@ from .integrator_base import (
     with_geometric_frame,
 )
 from .line_walk import start_walk
-from .params import path_parameters, typed_property
+from .params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS, path_parameters, typed_property
 from .variants import register_jit_plugin
 
 # (NORMAL_CHECKS, contradicts, mis_weight, sample_with_fallback and
@@ -141,7 +141,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
        - Light particles per camera sample for ``caustics``: more make the
          caustics converge faster and cost more (a particle costs about
          three camera samples, as it always goes through glass).
-         (Default: 0.05)
+         (Default: 0.03)
 
      * - caustic_camera_chains
        - |float|
@@ -181,11 +181,12 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             )
         self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
         self.caustics = typed_property(props, "caustics", bool, True, who)
-        self.caustic_paths = typed_property(props, "caustic_paths", float, 0.05, who)
+        self.caustic_paths = typed_property(props, "caustic_paths", float, CAUSTIC_PATHS, who)
         if not (self.caustic_paths > 0.0 and self.caustic_paths < 1e6):
             raise ValueError(
                 f"lathe_path: parameter 'caustic_paths' must be > 0 and finite; got {self.caustic_paths}")
-        self.caustic_camera_chains = typed_property(props, "caustic_camera_chains", float, 0.3, who)
+        self.caustic_camera_chains = typed_property(props, "caustic_camera_chains", float,
+                                                    CAUSTIC_CAMERA_CHAINS, who)
         if not (0.0 <= self.caustic_camera_chains <= 1.0):
             raise ValueError("lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; "
                              f"got {self.caustic_camera_chains}")

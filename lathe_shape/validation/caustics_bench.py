@@ -33,6 +33,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..plugin.params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS
+
 __all__ = ["SCENES", "bench_parser", "caustic_image", "glass_mask", "regions", "run_bench"]
 
 #: The benchmark's scenes: name -> (XML path under the repository, edit of
@@ -93,10 +95,11 @@ def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:
                                   mi.Float(float("inf"))))
 
 
-def path_integrator(caustics: bool, caustic_paths: float = 0.05) -> mi.Integrator:
+def path_integrator(caustics: bool, caustic_paths: float = CAUSTIC_PATHS,
+                    camera_chains: float = CAUSTIC_CAMERA_CHAINS) -> mi.Integrator:
     """``lathe_path`` (``max_depth`` 16) with or without ``caustics``."""
     return mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": caustics,
-                         "caustic_paths": caustic_paths})
+                         "caustic_paths": caustic_paths, "caustic_camera_chains": camera_chains})
 
 
 def luminance(image: np.ndarray) -> np.ndarray:
@@ -147,10 +150,11 @@ def reference_image(scene: mi.Scene, name: str, resolution: int, spp: int, cache
 
 
 def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[int], repeats: int,
-            caustic_paths: float) -> dict:
+            caustic_paths: float, camera_chains: float) -> dict:
     """{(method, spp): {"time": median s, region: mean error}} over
     ``repeats`` interleaved rounds (after one warm-up render each)."""
-    integrators = {"plain": path_integrator(False), "caustics": path_integrator(True, caustic_paths)}
+    integrators = {"plain": path_integrator(False),
+                   "caustics": path_integrator(True, caustic_paths, camera_chains)}
     for integrator in integrators.values():
         timed_render(scene, integrator, spp_list[0], 0)
     runs: dict = {}
@@ -194,7 +198,8 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--target-spp", type=int, default=256,
                         help="plain lathe_path's spp whose caustic-region error is the target")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--caustic-paths", type=float, default=0.05)
+    parser.add_argument("--caustic-paths", type=float, default=CAUSTIC_PATHS)
+    parser.add_argument("--caustic-camera-chains", type=float, default=CAUSTIC_CAMERA_CHAINS)
     parser.add_argument("--unbiased", type=int, default=0, metavar="SPP",
                         help="also render with caustics at SPP and compare its means with the reference")
     parser.add_argument("--variant", default="llvm_ad_rgb")
@@ -223,7 +228,8 @@ def run_bench(argv: list[str] | None = None) -> int:
         sizes = {region: int(mask.sum()) for region, mask in masks.items()}
         print(f"\n== {name}: caustic region {sizes['caustic']} px, glass {sizes['glass']} px")
         spp_list = sorted(set(args.spp) | {args.target_spp})
-        results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths)
+        results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths,
+                          args.caustic_camera_chains)
         print(f"{'method':>9} {'spp':>5} {'time s':>8} {'caustic':>8} {'glass':>8} {'image':>8}")
         for (method, spp), v in sorted(results.items(), key=lambda kv: (kv[0][1], kv[0][0])):
             errors = " ".join(f"{v[region]:>8.4f}" for region in ("caustic", "glass", "image"))
@@ -243,7 +249,8 @@ def run_bench(argv: list[str] | None = None) -> int:
             os.makedirs(args.save, exist_ok=True)
             write_exr(os.path.join(args.save, f"{name}_reference.exr"), reference.astype(np.float32))
             for method in ("plain", "caustics"):
-                integrator = path_integrator(method == "caustics", args.caustic_paths)
+                integrator = path_integrator(method == "caustics", args.caustic_paths,
+                                             args.caustic_camera_chains)
                 image, _ = timed_render(scene, integrator, 16, 1)
                 write_exr(os.path.join(args.save, f"{name}_{method}_16spp.exr"), image)
         if args.figure and name == args.scenes[0]:
@@ -251,7 +258,8 @@ def run_bench(argv: list[str] | None = None) -> int:
 
             frames = []
             for method in ("plain", "caustics"):
-                integrator = path_integrator(method == "caustics", args.caustic_paths)
+                integrator = path_integrator(method == "caustics", args.caustic_paths,
+                                             args.caustic_camera_chains)
                 image, _ = timed_render(scene, integrator, 16, 1)
                 errors = ", ".join(f"{region} {rel_mae(image, reference, mask):.3f}"
                                    for region, mask in masks.items())
@@ -259,7 +267,7 @@ def run_bench(argv: list[str] | None = None) -> int:
                 frames.append(image[..., :3])
             write_png(args.figure, np.concatenate(frames, axis=1))
         if args.unbiased:
-            integrator = path_integrator(True, args.caustic_paths)
+            integrator = path_integrator(True, args.caustic_paths, args.caustic_camera_chains)
             image = np.zeros_like(reference)
             passes = max(1, args.unbiased // 256)
             for index in range(passes):
