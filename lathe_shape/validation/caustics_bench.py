@@ -198,8 +198,10 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--target-spp", type=int, default=256,
                         help="plain lathe_path's spp whose caustic-region error is the target")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--caustic-paths", type=float, default=CAUSTIC_PATHS)
-    parser.add_argument("--caustic-camera-chains", type=float, default=CAUSTIC_CAMERA_CHAINS)
+    parser.add_argument("--caustic-paths", type=float, default=CAUSTIC_PATHS,
+                        help=f"lathe_path's caustic_paths (default: {CAUSTIC_PATHS})")
+    parser.add_argument("--caustic-camera-chains", type=float, default=CAUSTIC_CAMERA_CHAINS,
+                        help=f"lathe_path's caustic_camera_chains (default: {CAUSTIC_CAMERA_CHAINS})")
     parser.add_argument("--unbiased", type=int, default=0, metavar="SPP",
                         help="also render with caustics at SPP and compare its means with the reference")
     parser.add_argument("--variant", default="llvm_ad_rgb")
