@@ -279,6 +279,13 @@ class CausticTracer:
         self.spheres = aim_spheres(self.specular_lathes)
         #: The scene's emitters (to tell them apart in :meth:`light_selection`).
         self.emitters = list(emitters)
+        #: Position density of each light's shape (1 / its area; 0 for lights
+        #: without a shape), as path tracing reads it: read per light here,
+        #: not by a call on the shape pointer, whose traced dispatch would
+        #: reach every live shape, a <shapegroup> of another scene too,
+        #: which has no position density.
+        self.inverse_areas = [self._inverse_area(emitters[index]) for index in self.light_indices]
+        self._inverse_areas = [dr.opaque(mi.Float, value) for value in self.inverse_areas]
         #: Probability of each light (slot of :attr:`light_indices`) to send
         #: a particle: proportional to its power into the aiming cones (eq. 36).
         self.selection = np.zeros(0, dtype=np.float32)
@@ -403,7 +410,7 @@ class CausticTracer:
         # tracing cannot hit it)
         # (the shape's position density, as path tracing reads it: a textured
         # light samples its positions by radiance, which ps.pdf holds)
-        p_area = emitter.get_shape().pdf_position(ps, ~is_delta)
+        p_area = dr.gather(mi.Float, jit_array(mi.Float, self.inverse_areas), pick)
         area_density = per_camera_sample * area_light_density(p_select, p_area, p_cone, cos_light)
         light_density = dr.select(is_delta, dr.inf, area_density)
         # Directional light: a point on the disk of the chosen sphere facing
@@ -450,6 +457,22 @@ class CausticTracer:
         _, _, beta, _ = self._emit(scene, sampler, particles * lights, pick, mi.Float(1.0))
         power = np.nan_to_num(np.array(mi.luminance(beta)), nan=0.0, posinf=0.0).reshape(lights, particles)
         return np.maximum(power, 0.0).mean(axis=1)
+
+    @staticmethod
+    def _inverse_area(emitter: mi.Emitter) -> float:
+        """The position density of ``emitter``'s shape (0 without one)."""
+        shape = emitter.get_shape()
+        area = float(dr.slice(shape.surface_area())) if shape is not None else 0.0
+        return 1.0 / area if area > 0.0 else 0.0
+
+    def inverse_area(self, emitter: mi.EmitterPtr) -> mi.Float:
+        """The position density of ``emitter``'s shape, as path tracing
+        reads it (0 for lights that send no particles)."""
+        emitters = self.emitters
+        value = mi.Float(0.0)
+        for slot, index in enumerate(self.light_indices):
+            value = dr.select(emitter == mi.EmitterPtr(emitters[index]), self._inverse_areas[slot], value)
+        return value
 
     def light_selection(self, emitter: mi.EmitterPtr) -> mi.Float:
         """The probability with which :meth:`_trace` picks ``emitter``

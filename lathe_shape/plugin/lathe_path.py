@@ -29,7 +29,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .camera_chain import SAME_SOLUTION, chain_vertex, solve_camera_chain
+from .camera_chain import chain_vertex
 from .caustic_paths import (
     CausticTracer,
     caustic_weight,
@@ -37,6 +37,7 @@ from .caustic_paths import (
     on_lathe,
     pure_delta,
 )
+from .deferred_solves import DeferredChainSolves, initial_capacity
 from .integrator_base import (
     NORMAL_CHECKS,
     ExactLatheSamplingIntegrator,
@@ -210,6 +211,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             return None, f"caustics need a perspective sensor (this is '{sensor.class_name()}')"
         if self.hide_emitters:
             return None, "caustics are not traced with hide_emitters"
+        if mi.has_flag(sensor.film().flags(), mi.FilmFlags.Special):
+            return None, f"caustics need an RGB film (this is '{sensor.film().class_name()}')"
         depth = self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30
         chain = chain_length_limit(depth, self.caustic_max_chain)
         vertices = chain_length_limit(depth, 1 << 30)  # (both chains together)
@@ -235,11 +238,21 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         crop = film.crop_size()
         count = max(1, round(self.caustic_paths * spp * crop.x * crop.y))
         per_camera_sample = count / (spp * crop.x * crop.y)
-        self._caustic_render = (tracer, dr.opaque(mi.Float, per_camera_sample))
-        try:
-            image = super().render(scene, sensor, seed, spp, develop, evaluate)
-        finally:
-            self._caustic_render = None
+        # Eq. 40's rare solves wait in a buffer (deferred_solves.py); one
+        # that overflowed renders again (the same samples) with room for all
+        capacity = initial_capacity(spp * crop.x * crop.y)
+        while True:
+            deferred = DeferredChainSolves(capacity)
+            self._caustic_render = (tracer, dr.opaque(mi.Float, per_camera_sample), deferred)
+            try:
+                super().render(scene, sensor, seed, spp, develop=False, evaluate=True)
+            finally:
+                self._caustic_render = None
+            if not deferred.overflowed():
+                break
+            capacity = deferred.count()
+        deferred.put(tracer, self.geometry(scene), sensor_obj)
+        image = film.develop()
         caustic = tracer.render(scene, self.geometry(scene), sensor_obj, seed, count,
                                 dr.opaque(mi.Float, per_camera_sample))
         image = add_to_film(film, image, caustic)
@@ -287,7 +300,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         em_value = mi.Spectrum(0.0)                      # Its contribution if unoccluded
         # Eq. 32: caustic paths, also traced from the lights (see render)
         caustics = self._caustic_render
-        tracer, per_camera_sample = caustics if caustics is not None else (None, None)
+        tracer, per_camera_sample, deferred = caustics if caustics is not None else (None, None, None)
         caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
         caustic_chain = mi.UInt32(0)         # Its specular vertices after D
         caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
@@ -329,27 +342,22 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 if both:
                     p_select = tracer.light_selection(ds.emitter)
                     density_surface = tracer.light_density(
-                        p_select, si.shape.pdf_position(ds, surface), dr.dot(si.sh_frame.n, ray.d), si.p,
-                        -ray.d)
+                        p_select, tracer.inverse_area(ds.emitter), dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
                     density_environment = tracer.environment_density(
                         p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
                     light_density = dr.select(environment, density_environment, density_surface)
                     light_density *= per_camera_sample
                     # Eq. 40: through a camera chain, the light tracer samples
-                    # this path only if the solver from D finds this very chain
+                    # this path only if the solver from D finds this very
+                    # chain (only where the light sends particles: not a
+                    # uniform sky); these hits are solved and added after
+                    # the render kernel (deferred_solves.py)
+                    defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
                     limit = dr.minimum(tracer.max_chain, tracer.max_vertices - caustic_chain)
-                    # (only where the light sends particles: not a uniform sky)
-                    solution = solve_camera_chain(geometry, tracer.camera._origin, d_p, d_n, d_shape, limit,
-                                                  both & d_through & (light_density > 0.0)
-                                                  & (tracer.chain_share > 0.0))
-                    same = (solution.found & (solution.vertices == d_vertices)
-                            & (dr.norm(solution.d - camera_d) < SAME_SOLUTION))
-                    chain_density = dr.select(same, tracer.chain_share * light_density, 0.0)
-                    light_density = dr.select(d_through, chain_density, light_density)
-                    density = dr.select(d_through, caustic_density * camera_branch
-                                        * tracer.camera.direction_density(camera_d)
-                                        / solution.area_per_solid_angle, caustic_density)
-                    mis_bsdf *= caustic_weight(density, light_density)
+                    deferred.record(defer, beta * mis_bsdf * ds.emitter.eval(si, defer), light_density, limit,
+                                    d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
+                    mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
+                                          caustic_weight(caustic_density, light_density))
             emitted = ds.emitter.eval(si, active)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
