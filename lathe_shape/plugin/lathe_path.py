@@ -133,8 +133,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
          solver finds; combined with path tracing by multiple
          importance sampling, so the image stays unbiased and its caustics
          converge many times faster. Point and spot light caustics, which
-         path tracing cannot find, appear only with it. Needs an RGB variant
-         and a ``perspective`` sensor; ignored (path tracing alone) with
+         path tracing cannot find, appear only with it. Needs an RGB variant,
+         a ``perspective`` sensor and a film that is not a special one
+         (``hdrfilm``, not ``specfilm``); ignored (path tracing alone) with
          ``hide_emitters``. (Default: true)
 
      * - caustic_paths
