@@ -277,7 +277,7 @@ class CausticTracer:
                                 if not mi.has_flag(lathe.bsdf().flags(), mi.BSDFFlags.Smooth)]
         #: The spheres that particles aim at (eq. 33).
         self.spheres = aim_spheres(self.specular_lathes)
-        #: The scene's emitters (to tell them apart in :meth:`light_selection`).
+        #: The scene's emitters (to tell them apart in :meth:`light_values`).
         self.emitters = list(emitters)
         #: Position density of each light's shape (1 / its area; 0 for lights
         #: without a shape), as path tracing reads it: read per light here,
@@ -465,23 +465,17 @@ class CausticTracer:
         area = float(dr.slice(shape.surface_area())) if shape is not None else 0.0
         return 1.0 / area if area > 0.0 else 0.0
 
-    def inverse_area(self, emitter: mi.EmitterPtr) -> mi.Float:
-        """The position density of ``emitter``'s shape, as path tracing
-        reads it (0 for lights that send no particles)."""
+    def light_values(self, emitter: mi.EmitterPtr) -> tuple[mi.Float, mi.Float]:
+        """(The probability with which :meth:`_trace` picks ``emitter``, the
+        position density of its shape as path tracing reads it); (0, 0) for
+        lights that send no particles."""
         emitters = self.emitters
-        value = mi.Float(0.0)
+        chosen, inverse_area = mi.Float(0.0), mi.Float(0.0)
         for slot, index in enumerate(self.light_indices):
-            value = dr.select(emitter == mi.EmitterPtr(emitters[index]), self._inverse_areas[slot], value)
-        return value
-
-    def light_selection(self, emitter: mi.EmitterPtr) -> mi.Float:
-        """The probability with which :meth:`_trace` picks ``emitter``
-        (0 for lights that send no particles)."""
-        emitters = self.emitters
-        chosen = mi.Float(0.0)
-        for slot, index in enumerate(self.light_indices):
-            chosen = dr.select(emitter == mi.EmitterPtr(emitters[index]), self._selection[slot], chosen)
-        return chosen
+            this = emitter == mi.EmitterPtr(emitters[index])
+            chosen = dr.select(this, self._selection[slot], chosen)
+            inverse_area = dr.select(this, self._inverse_areas[slot], inverse_area)
+        return chosen, inverse_area
 
     @dr.syntax
     def _trace(self, scene: mi.Scene, geometry, sensor: mi.Sensor, sampler: mi.Sampler, size: int,

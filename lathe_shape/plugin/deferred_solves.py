@@ -5,10 +5,12 @@ Where a path-traced caustic path reaches its diffuse vertex ``D`` through a
 camera chain (camera -> Dirac deltas -> ``D`` -> Dirac deltas -> light), its
 multiple importance weight needs the camera chain's solve from ``D`` (does
 the light tracer's solver find this very chain?). Such hits are rare (394
-of 4.2M samples of the brandy bottle at 64 spp), but the solver's code in
-the render kernel slowed every sample by 5-7% (docs/benchmarks.md). So the
-kernel only records them (:meth:`DeferredChainSolves.record`, an append
-buffer filled with ``dr.scatter_inc``), and :meth:`~DeferredChainSolves.put`
+of 4.2M samples of the brandy bottle at 64 spp), yet solving them inside
+the render kernel cost every sample time: solved here instead, caustics
+went from 1.25-1.34x plain's time to 1.22-1.29x, lower in each of five
+paired runs (docs/benchmarks.md). So the kernel only records them
+(:meth:`DeferredChainSolves.record`, an append buffer filled with
+``dr.scatter_inc``), and :meth:`~DeferredChainSolves.put`
 solves them in a kernel of their own and adds their weighted contributions
 to the film at the samples' own positions, through the film's filter with
 no weight of their own: the film's develop divides them by the weights its

@@ -341,9 +341,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 # (a symbolic branch: the packets of lanes without such a
                 # path skip the densities and the camera chain's solve)
                 if both:
-                    p_select = tracer.light_selection(ds.emitter)
+                    p_select, p_area = tracer.light_values(ds.emitter)
                     density_surface = tracer.light_density(
-                        p_select, tracer.inverse_area(ds.emitter), dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
+                        p_select, p_area, dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
                     density_environment = tracer.environment_density(
                         p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
                     light_density = dr.select(environment, density_environment, density_surface)
