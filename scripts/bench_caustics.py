@@ -4,7 +4,7 @@ glass pixels and the whole image against a high-spp plain reference, and the
 time to reach plain's 256 spp error.
 
     python scripts/bench_caustics.py                           # bottle, wine glass, 256x256
-    python scripts/bench_caustics.py --scenes sundae_cup paper_bspline --unbiased 1024
+    python scripts/bench_caustics.py --scenes sundae_cup paper_bspline pov_samples --unbiased 1024
 """
 
 from lathe_shape.validation.caustics_bench import run_bench

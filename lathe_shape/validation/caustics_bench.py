@@ -47,6 +47,9 @@ SCENES = {
     # lights, whose caustics plain path tracing cannot render) under the
     # wine glass scene's soft box
     "paper_bspline": ("scenes/wine_glass.xml", "bspline"),
+    # POV-Ray's curve kinds, imported: a catmull_rom goblet (thindielectric),
+    # a tinted sor bottle (dielectric), a bezier vase and an open bezier cup
+    "pov_samples": ("scenes/pov_samples/pov_samples.xml", None),
 }
 
 

@@ -325,9 +325,11 @@ def test_crop_window_gets_the_same_caustic():
     assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
-@pytest.mark.parametrize("lathe", ["ball", "wine glass"])
+@pytest.mark.parametrize("lathe", ["ball", "wine glass", "imported goblet"])
 def test_white_furnace_with_caustics(lathe):
-    """A glass (the ball, or a hollow wine glass) on a white floor (albedo 1)
+    """A glass (the ball, a hollow wine glass, or the hollow goblet imported
+    from POV-Ray's samples: a catmull_rom curve, the cubic kernel, with its
+    scene's thindielectric) on a white floor (albedo 1)
     inside a sphere that emits radiance 1 inward and reflects nothing:
     every pixel is 1. Almost all the floor's light comes through the glass
     or straight from the sphere; with many particles (16 per camera sample)
@@ -339,9 +341,14 @@ def test_white_furnace_with_caustics(lathe):
 
     if lathe == "ball":
         glass = {"profile": BALL}
-    else:  # the example scene's wine glass (18.1 tall), 1.5 tall
+    elif lathe == "wine glass":  # the example scene's wine glass (18.1 tall), 1.5 tall
         glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "wine_glass.csv"),
                  "to_world": mi.ScalarTransform4f().scale(1.5 / 18.1)}
+    else:  # scenes/pov_samples' goblet (8.25 tall), 1.5 tall
+        glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "pov_samples",
+                                          "profiles", "Goblet.csv"),
+                 "to_world": mi.ScalarTransform4f().scale(1.5 / 8.25)}
+    bsdf = "thindielectric" if lathe == "imported goblet" else "dielectric"
     camera = mi.ScalarTransform4f().look_at(origin=[0, -3.5, 2.2], target=[0, 0, 0.6], up=[0, 0, 1])
     sensor = {"type": "perspective", "fov": 40, "to_world": camera,
               "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
@@ -354,7 +361,7 @@ def test_white_furnace_with_caustics(lathe):
         "floor": {"type": "disk", "to_world": mi.ScalarTransform4f().scale([7.9, 7.9, 1]),
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
                                                         "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}},
-        "glass": {"type": "lathe", **glass, "bsdf": {"type": "dielectric", "int_ior": 1.5}}})
+        "glass": {"type": "lathe", **glass, "bsdf": {"type": bsdf, "int_ior": 1.5}}})
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 64, "rr_depth": 64,
                                "caustic_paths": 16.0, "caustic_camera_chains": 1.0})
     image = luminance(np.array(mi.render(scene, integrator=integrator, spp=64, seed=3), dtype=np.float64))
