@@ -325,11 +325,12 @@ def test_crop_window_gets_the_same_caustic():
     assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
-@pytest.mark.parametrize("lathe", ["ball", "wine glass", "imported goblet"])
+@pytest.mark.parametrize("lathe", ["ball", "wine glass", "imported goblet", "mirror ball"])
 def test_white_furnace_with_caustics(lathe):
     """A glass (the ball, a hollow wine glass, or the hollow goblet imported
     from POV-Ray's samples: a catmull_rom curve, the cubic kernel, with its
-    scene's thindielectric) on a white floor (albedo 1)
+    scene's thindielectric) or a mirror (the ball as a perfect conductor)
+    on a white floor (albedo 1)
     inside a sphere that emits radiance 1 inward and reflects nothing:
     every pixel is 1. Almost all the floor's light comes through the glass
     or straight from the sphere; with many particles (16 per camera sample)
@@ -339,7 +340,7 @@ def test_white_furnace_with_caustics(lathe):
     as a mean off 1."""
     import os
 
-    if lathe == "ball":
+    if lathe in ("ball", "mirror ball"):
         glass = {"profile": BALL}
     elif lathe == "wine glass":  # the example scene's wine glass (18.1 tall), 1.5 tall
         glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "wine_glass.csv"),
@@ -348,7 +349,9 @@ def test_white_furnace_with_caustics(lathe):
         glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "pov_samples",
                                           "profiles", "Goblet.csv"),
                  "to_world": mi.ScalarTransform4f().scale(1.5 / 8.25)}
-    bsdf = "thindielectric" if lathe == "imported goblet" else "dielectric"
+    bsdf = {"type": "thindielectric" if lathe == "imported goblet" else "dielectric", "int_ior": 1.5}
+    if lathe == "mirror ball":
+        bsdf = {"type": "conductor"}  # (material "none": reflectance 1)
     camera = mi.ScalarTransform4f().look_at(origin=[0, -3.5, 2.2], target=[0, 0, 0.6], up=[0, 0, 1])
     sensor = {"type": "perspective", "fov": 40, "to_world": camera,
               "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
@@ -361,7 +364,7 @@ def test_white_furnace_with_caustics(lathe):
         "floor": {"type": "disk", "to_world": mi.ScalarTransform4f().scale([7.9, 7.9, 1]),
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
                                                         "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}},
-        "glass": {"type": "lathe", **glass, "bsdf": {"type": bsdf, "int_ior": 1.5}}})
+        "glass": {"type": "lathe", **glass, "bsdf": bsdf}})
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 64, "rr_depth": 64,
                                "caustic_paths": 16.0, "caustic_camera_chains": 1.0})
     image = luminance(np.array(mi.render(scene, integrator=integrator, spp=64, seed=3), dtype=np.float64))
