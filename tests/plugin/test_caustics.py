@@ -340,15 +340,15 @@ def test_white_furnace_with_caustics(lathe):
     as a mean off 1."""
     import os
 
+    scenes = os.path.join(os.path.dirname(__file__), "..", "..", "scenes")
     if lathe in ("ball", "mirror ball"):
-        glass = {"profile": BALL}
+        lathe_params = {"profile": BALL}
     elif lathe == "wine glass":  # the example scene's wine glass (18.1 tall), 1.5 tall
-        glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "wine_glass.csv"),
-                 "to_world": mi.ScalarTransform4f().scale(1.5 / 18.1)}
-    else:  # scenes/pov_samples' goblet (8.25 tall), 1.5 tall
-        glass = {"filename": os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "pov_samples",
-                                          "profiles", "Goblet.csv"),
-                 "to_world": mi.ScalarTransform4f().scale(1.5 / 8.25)}
+        lathe_params = {"filename": os.path.join(scenes, "wine_glass.csv"),
+                        "to_world": mi.ScalarTransform4f().scale(1.5 / 18.1)}
+    else:  # scenes/pov_samples' goblet (its curve 8.05 tall), 1.5 tall
+        lathe_params = {"filename": os.path.join(scenes, "pov_samples", "profiles", "Goblet.csv"),
+                        "to_world": mi.ScalarTransform4f().scale(1.5 / 8.05)}
     bsdf = {"type": "thindielectric" if lathe == "imported goblet" else "dielectric", "int_ior": 1.5}
     if lathe == "mirror ball":
         bsdf = {"type": "conductor"}  # (material "none": reflectance 1)
@@ -364,7 +364,7 @@ def test_white_furnace_with_caustics(lathe):
         "floor": {"type": "disk", "to_world": mi.ScalarTransform4f().scale([7.9, 7.9, 1]),
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
                                                         "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}},
-        "glass": {"type": "lathe", **glass, "bsdf": bsdf}})
+        "glass": {"type": "lathe", **lathe_params, "bsdf": bsdf}})
     integrator = mi.load_dict({"type": "lathe_path", "max_depth": 64, "rr_depth": 64,
                                "caustic_paths": 16.0, "caustic_camera_chains": 1.0})
     image = luminance(np.array(mi.render(scene, integrator=integrator, spp=64, seed=3), dtype=np.float64))
