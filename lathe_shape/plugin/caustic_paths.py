@@ -523,8 +523,12 @@ class CausticTracer:
             ds_here, importance_here = sensor.sample_direction(mi.Interaction3f(si), sampler.next_2d(), lands)
             ds[lands] = ds_here
             importance[lands] = importance_here
-            shadow = si.spawn_ray_to(ds_here.p)
-            pending = lands & (ds_here.pdf > 0.0)
+            # (tested off the film too: only a D whose straight line to the
+            # camera is blocked tries a chain; where it is clear and off the
+            # film, the solver's first trace, that same line, meets no glass
+            # and fails on both sides of eq. 40)
+            shadow = si.spawn_ray_to(self.camera._origin)
+            pending = lands
             active = valid & delta & (chain < self.max_chain)
 
             # Eq. 11 at a specular vertex, as lathe_path does
