@@ -51,7 +51,7 @@ def test_readme_keeps_the_commands_first():
     assert blocks[0].startswith("apt-get update") and "lathe-render scenes/brandy_bottle.xml" in blocks[0]
     assert blocks[1] == ("apt-get update && apt-get install -y libllvm19 povray povray-examples && "
                          "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && "
-                         ".venv/bin/python -m pytest -q")
+                         ".venv/bin/python -m pytest -q -n 2")
     assert text.index(blocks[1]) < text.index("## ")
 
 
