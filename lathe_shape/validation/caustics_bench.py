@@ -18,7 +18,8 @@ reach plain ``lathe_path``'s error at ``--target-spp`` in the caustic region
 (interpolated with error ~ 1/sqrt(time) from the nearest measured run) as a
 fraction of plain's time; the same on the glass pixels; and, with
 ``--unbiased SPP``, the mean of a caustic render at that spp against the
-reference on each region.
+reference on each region; and the camera-chain solver's success rate
+(:func:`chain_solve_rate`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ import numpy as np
 
 from ..plugin.params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS
 
-__all__ = ["SCENES", "bench_parser", "caustic_image", "glass_mask", "regions", "run_bench"]
+__all__ = ["SCENES", "bench_parser", "caustic_image", "chain_solve_rate", "glass_mask", "regions",
+           "run_bench"]
 
 #: The benchmark's scenes: name -> (XML path under the repository, edit of
 #: its text or None).
@@ -103,6 +105,33 @@ def path_integrator(caustics: bool, caustic_paths: float = CAUSTIC_PATHS,
     """``lathe_path`` (``max_depth`` 16) with or without ``caustics``."""
     return mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": caustics,
                          "caustic_paths": caustic_paths, "caustic_camera_chains": camera_chains})
+
+
+def chain_solve_rate(scene: mi.Scene, particles: int = 100_000, seed: int = 1) -> tuple[int, int, dict]:
+    """Eqs. 37-40's solver on ``scene``: of ``particles`` particles traced
+    from its lights, those that land where the camera's straight line is
+    blocked all try the chain to the camera (``caustic_camera_chains`` 1);
+    returns (how many tried, how many were solved, {vertices of a solved
+    chain: how many})."""
+    from ..plugin.camera_chain import solve_camera_chain
+
+    integrator = path_integrator(True, camera_chains=1.0)
+    sensor = scene.sensors()[0]
+    tracer, why = integrator.caustic_setup(scene, sensor)
+    if tracer is None:
+        raise RuntimeError(f"no caustic paths to trace: {why}")
+    geometry = integrator.geometry(scene)
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(seed, particles)
+    behind = tracer._trace(scene, geometry, sensor, sampler, particles, mi.Float(1.0))[3]
+    lanes = dr.compress(behind[0])
+    _, si_d, _, _, chain_d = (dr.gather(type(value), value, lanes) for value in behind)
+    limit = dr.minimum(tracer.max_chain, tracer.max_vertices - chain_d)
+    solution = solve_camera_chain(geometry, tracer.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
+                                  limit >= 1)
+    found = np.array(solution.found, dtype=bool)
+    vertices = np.array(solution.vertices)[found]
+    return len(found), int(found.sum()), {int(k): int((vertices == k).sum()) for k in np.unique(vertices)}
 
 
 def luminance(image: np.ndarray) -> np.ndarray:
@@ -248,6 +277,11 @@ def run_bench(argv: list[str] | None = None) -> int:
         for spp in spp_list:
             print(f"cost per sample at {spp} spp: caustics/plain = "
                   f"{results[('caustics', spp)]['time'] / results[('plain', spp)]['time']:.2f}")
+        tried, solved, by_vertices = chain_solve_rate(scene)
+        counts = ", ".join(f"{k}: {v}" for k, v in by_vertices.items()) or "none"
+        print(f"camera chains (eqs. 37-40): of 100000 particles, {tried} landed where the camera's "
+              f"straight line is blocked; {solved} ({100 * solved / max(tried, 1):.1f}%) solved "
+              f"(by chain vertices: {counts})")
         if args.save:
             from ..tools.images import write_exr
 

@@ -149,6 +149,17 @@ def test_caustic_seen_through_a_glass_pane():
     assert np.abs(traced - plain)[region].mean() < 0.5 * np.abs(plain_256 - plain)[region].mean()
 
 
+def test_chain_solve_rate_through_a_pane():
+    """The benchmark's solver count: behind the pane that fills the view,
+    almost every particle that lands on the floor the camera sees through
+    it, and nearly all of those chains (two refractions) are solved."""
+    from lathe_shape.validation.caustics_bench import chain_solve_rate
+
+    tried, solved, by_vertices = chain_solve_rate(ball_scene("area", pane=True), particles=20_000)
+    assert tried > 1000 and solved == sum(by_vertices.values())
+    assert solved > 0.9 * tried and by_vertices.get(2, 0) > 0.9 * solved
+
+
 def test_weights_sum_to_one_with_a_textured_light():
     """A bitmap-textured area light samples its points by radiance: the
     weights must still read the shape's position density on both sides
