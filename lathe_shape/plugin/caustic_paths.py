@@ -306,6 +306,12 @@ class CausticTracer:
         """Whether there is anything to trace (lights and specular lathes)."""
         return bool(self.light_indices) and bool(self.specular_lathes) and self.max_chain >= 1
 
+    def camera_chain_limit(self, light_chain: mi.UInt32) -> mi.UInt32:
+        """Eq. 40: the most Dirac-delta vertices of the camera chain of a
+        path whose chain from ``D`` to the light has ``light_chain`` of
+        them (both sides of eq. 40 solve with this bound)."""
+        return dr.minimum(self.max_chain, self.max_vertices - light_chain)
+
     def light_density(self, p_select: mi.Float, p_area: mi.Float, cos_light: mi.Float, p: mi.Point3f,
                       d: mi.Vector3f) -> mi.Float:
         """Eq. 32, light side: the density of a particle leaving an area
@@ -601,7 +607,7 @@ class CausticTracer:
         solver's loop runs for them alone): (film positions, values,
         splat)."""
         _, si_d, beta, light_density, chain_d = behind
-        limit = dr.minimum(self.max_chain, self.max_vertices - chain_d)
+        limit = self.camera_chain_limit(chain_d)
         solution = solve_camera_chain(geometry, self.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
                                       limit >= 1)
         through = solution.found

@@ -354,7 +354,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                     # uniform sky); these hits are solved and added after
                     # the render kernel (deferred_solves.py)
                     defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
-                    limit = dr.minimum(tracer.max_chain, tracer.max_vertices - caustic_chain)
+                    limit = tracer.camera_chain_limit(caustic_chain)
                     deferred.record(defer, beta * mis_bsdf * ds.emitter.eval(si, defer), light_density, limit,
                                     d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
                     mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),

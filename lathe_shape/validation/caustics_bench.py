@@ -126,7 +126,7 @@ def chain_solve_rate(scene: mi.Scene, particles: int = 100_000, seed: int = 1) -
     behind = tracer._trace(scene, geometry, sensor, sampler, particles, mi.Float(1.0))[3]
     lanes = dr.compress(behind[0])
     _, si_d, _, _, chain_d = (dr.gather(type(value), value, lanes) for value in behind)
-    limit = dr.minimum(tracer.max_chain, tracer.max_vertices - chain_d)
+    limit = tracer.camera_chain_limit(chain_d)
     solution = solve_camera_chain(geometry, tracer.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
                                   limit >= 1)
     found = np.array(solution.found, dtype=bool)
