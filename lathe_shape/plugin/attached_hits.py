@@ -6,7 +6,8 @@ detached; :func:`attach_lathe_hits` re-derives each lathe hit's distance,
 position, geometric normal and shading frame from the profile points
 (lathe_shape/kernels/attached.py, docs/method.md eqs. 21-25) and grafts
 their derivatives onto the detached values (``dr.replace_grad``), so that
-every primal value stays the exact kernel's.
+every primal value stays the exact kernel's; :func:`attached_direction`
+turns a sampled Dirac-delta direction with the attached vertex (eq. 28).
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from ..kernels.attached import AttachedHit, attached_bspline, attached_polyline
 from ..surfaces import KINDS, kind_of
 from .shape import LatheShape
 
-__all__ = ["attach_lathe_hits", "differentiable_kinds", "differentiable_lathes", "lathe_hit"]
+__all__ = ["attach_lathe_hits", "attached_direction", "differentiable_kinds", "differentiable_lathes",
+           "lathe_hit"]
 
 
 def differentiable_kinds() -> tuple[str, ...]:
@@ -85,3 +87,60 @@ def attach_lathe_hits(lathes: list[LatheShape], ray: mi.Ray3f,
         si.sh_frame = dr.select(mine, frame, si.sh_frame)
         si.wi = dr.select(mine, si.to_local(-ray.d), si.wi)
     return si
+
+
+def attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
+                       bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool,
+                       lobes: tuple[bool, bool], grazing_cosine: float,
+                       stored: list | None = None) -> tuple[mi.Vector3f, mi.Spectrum]:
+    """The sampled direction ``wo_world`` and a factor of primal value 1
+    carrying the derivative of the sample's weight, at the attached vertex
+    ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
+    a Dirac delta's direction is rebuilt here from the attached incident
+    direction and frame (eq. 28: a mirror reflection, or a refraction with
+    the sample's relative IOR) and its Fresnel weight from the attached
+    angle, the lobe choice held; any other lobe's direction stays put and
+    its weight follows the attached BSDF value (eq. 29). Near grazing and
+    near the critical angle these derivatives are unbounded and left out
+    (eq. 30). ``lobes``: whether the scene has delta lobes, and other
+    lobes (:func:`scene_lobes`); ``grazing_cosine``: eq. 30's threshold;
+    ``stored``: a list that receives the detached values to evaluate with
+    the vertex (None: evaluated here)."""
+    has_delta, has_smooth = lobes
+    if not has_delta:
+        value = bsdf.eval(ctx, si, si.to_local(wo_world), active)
+        return wo_world, dr.select(dr.detach(value) == 0.0, 1.0, dr.relative_grad(value))
+    delta = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
+    # The relative IOR of the transmission the lobe choice was made against
+    # (for a reflection, from a draw with transmission alone; none: a
+    # mirror, or total internal reflection, whose weight is constant)
+    only_transmission = mi.BSDFContext()
+    only_transmission.type_mask = mi.BSDFFlags.DeltaTransmission
+    transmitted, _ = bsdf.sample(only_transmission, dr.detach(si), 0.5, sample_2, delta & reflected)
+    # (stored, as the vertex's other detached values)
+    if stored is None:
+        dr.eval(transmitted)
+    else:
+        stored.append(transmitted)
+    eta_it = dr.select(reflected, transmitted.eta, bs.eta)
+    fresnel = delta & dr.select(reflected, transmitted.pdf > 0.0, True) & (eta_it != 1.0)
+    wi = si.wi
+    cos_i = mi.Frame3f.cos_theta(wi)
+    eta_ti = dr.rcp(eta_it)
+    cos_t = -dr.mulsign(dr.safe_sqrt(1.0 - dr.square(eta_ti) * (1.0 - dr.square(cos_i))), dr.detach(cos_i))
+    wo_local = dr.select(reflected, mi.reflect(wi), mi.refract(wi, cos_t, eta_ti))
+    cos_t_detached = dr.abs(dr.detach(cos_t))
+    grazing = delta & (dr.abs(dr.detach(cos_i)) < grazing_cosine)
+    grazing |= delta & ~reflected & (cos_t_detached < grazing_cosine)
+    critical = fresnel & (cos_t_detached < grazing_cosine)
+    turned = dr.replace_grad(wo_world, si.to_world(wo_local))
+    wo_world = dr.select(delta & ~grazing, turned, wo_world)
+    # Eq. 28: F of the interface (IOR inside over outside) at the attached angle
+    eta = dr.select(dr.detach(cos_i) > 0.0, eta_it, eta_ti)
+    reflectance, _, _, _ = mi.fresnel(cos_i, eta)
+    value = mi.Spectrum(dr.select(reflected, reflectance, 1.0 - reflectance))
+    if has_smooth:
+        value = dr.select(delta, value, bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta))
+    held = grazing | critical | (delta & ~fresnel) | (dr.detach(value) == 0.0)
+    return wo_world, dr.select(held, 1.0, dr.relative_grad(value))

@@ -23,8 +23,9 @@ refraction and reflection through glass: "interior" derivatives). Not
 included in that part: the change of *which* surface a ray sees. At the
 lathe's outline as the camera sees it, that change is added by edge
 sampling of the exact silhouette (``silhouette``, docs/method.md eqs.
-26-27); shadow boundaries and outlines seen through other surfaces are
-left out (their share is measured in docs/differentiable.md),
+26-27), and at the lathes' outlines seen through glass by edge sampling
+on scan lines (``glass_outlines``, eqs. 41-43); shadow boundaries are left
+out (measured in docs/differentiable.md),
 as is a delta vertex within ``grazing_cosine`` (0.2) of grazing (eq. 30). Non-lathe
 shapes are not differentiated with respect to their geometry.
 
@@ -45,7 +46,8 @@ import mitsuba as mi
 import numpy as np
 from mitsuba.ad.integrators.common import RBIntegrator, solid_angle_to_area_jacobian
 
-from .attached_hits import attach_lathe_hits, differentiable_lathes
+from .attached_hits import attach_lathe_hits, attached_direction, differentiable_lathes
+from .glass_outlines import GLASS_OUTLINE_LINES, glass_outline_backward, glass_outline_forward
 from .integrator_base import (
     contradicts,
     exact_lathe_base,
@@ -136,64 +138,6 @@ def scene_lobes(scene: mi.Scene) -> tuple[bool, bool]:
     return delta, smooth
 
 
-def _attached_direction(bsdf: mi.BSDFPtr, ctx: mi.BSDFContext, si: mi.SurfaceInteraction3f,
-                        bs: mi.BSDFSample3f, wo_world: mi.Vector3f, sample_2: mi.Point2f, active: mi.Bool,
-                        lobes: tuple[bool, bool] = (True, True),
-                        grazing_cosine: float = GRAZING_COSINE,
-                        stored: list | None = None) -> tuple[mi.Vector3f, mi.Spectrum]:
-    """The sampled direction ``wo_world`` and a factor of primal value 1
-    carrying the derivative of the sample's weight, at the attached vertex
-    ``si`` (``bs``: the detached draw). Mitsuba's BSDFs sample detached, so
-    a Dirac delta's direction is rebuilt here from the attached incident
-    direction and frame (eq. 28: a mirror reflection, or a refraction with
-    the sample's relative IOR) and its Fresnel weight from the attached
-    angle, the lobe choice held; any other lobe's direction stays put and
-    its weight follows the attached BSDF value (eq. 29). Near grazing and
-    near the critical angle these derivatives are unbounded and left out
-    (eq. 30). ``lobes``: whether the scene has delta lobes, and other
-    lobes (:func:`scene_lobes`); ``grazing_cosine``: eq. 30's threshold;
-    ``stored``: a list that receives the detached values to evaluate with
-    the vertex (None: evaluated here)."""
-    has_delta, has_smooth = lobes
-    if not has_delta:
-        value = bsdf.eval(ctx, si, si.to_local(wo_world), active)
-        return wo_world, dr.select(dr.detach(value) == 0.0, 1.0, dr.relative_grad(value))
-    delta = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
-    # The relative IOR of the transmission the lobe choice was made against
-    # (for a reflection, from a draw with transmission alone; none: a
-    # mirror, or total internal reflection, whose weight is constant)
-    only_transmission = mi.BSDFContext()
-    only_transmission.type_mask = mi.BSDFFlags.DeltaTransmission
-    transmitted, _ = bsdf.sample(only_transmission, dr.detach(si), 0.5, sample_2, delta & reflected)
-    # (stored, as the vertex's other detached values)
-    if stored is None:
-        dr.eval(transmitted)
-    else:
-        stored.append(transmitted)
-    eta_it = dr.select(reflected, transmitted.eta, bs.eta)
-    fresnel = delta & dr.select(reflected, transmitted.pdf > 0.0, True) & (eta_it != 1.0)
-    wi = si.wi
-    cos_i = mi.Frame3f.cos_theta(wi)
-    eta_ti = dr.rcp(eta_it)
-    cos_t = -dr.mulsign(dr.safe_sqrt(1.0 - dr.square(eta_ti) * (1.0 - dr.square(cos_i))), dr.detach(cos_i))
-    wo_local = dr.select(reflected, mi.reflect(wi), mi.refract(wi, cos_t, eta_ti))
-    cos_t_detached = dr.abs(dr.detach(cos_t))
-    grazing = delta & (dr.abs(dr.detach(cos_i)) < grazing_cosine)
-    grazing |= delta & ~reflected & (cos_t_detached < grazing_cosine)
-    critical = fresnel & (cos_t_detached < grazing_cosine)
-    turned = dr.replace_grad(wo_world, si.to_world(wo_local))
-    wo_world = dr.select(delta & ~grazing, turned, wo_world)
-    # Eq. 28: F of the interface (IOR inside over outside) at the attached angle
-    eta = dr.select(dr.detach(cos_i) > 0.0, eta_it, eta_ti)
-    reflectance, _, _, _ = mi.fresnel(cos_i, eta)
-    value = mi.Spectrum(dr.select(reflected, reflectance, 1.0 - reflectance))
-    if has_smooth:
-        value = dr.select(delta, value, bsdf.eval(ctx, si, si.to_local(wo_world), active & ~delta))
-    held = grazing | critical | (delta & ~fresnel) | (dr.detach(value) == 0.0)
-    return wo_world, dr.select(held, 1.0, dr.relative_grad(value))
-
-
 @dataclasses.dataclass
 class _Path:
     """The state of a path between two vertices."""
@@ -244,6 +188,19 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
        - |int|
        - Camera rays on each side of every outline sample. (Default: 4)
 
+     * - glass_outlines
+       - |bool|
+       - Add the derivative of the lathes' outlines that the camera sees
+         through Dirac-delta chains (the inner rim, the far wall or a solid
+         stem seen through a glass's wall): edge sampling on scan lines,
+         :mod:`lathe_shape.plugin.glass_outlines`, docs/method.md eqs.
+         41-42. Only where the scene has a Dirac-delta BSDF. (Default: true)
+
+     * - glass_outline_lines
+       - |int|
+       - Scan lines per pixel, across the rows and down the columns, on
+         which ``glass_outlines`` looks for those outlines. (Default: 1)
+
      * - grazing_cosine
        - |float|
        - Eq. 30: a Dirac-delta vertex whose incident or outgoing cosine is
@@ -265,6 +222,11 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, who)
         if self.silhouette_spp < 1:
             raise ValueError(f"lathe_prb: parameter 'silhouette_spp' must be >= 1, got {self.silhouette_spp}")
+        self.glass_outlines = typed_property(props, "glass_outlines", bool, True, who)
+        self.glass_outline_lines = typed_property(props, "glass_outline_lines", int, GLASS_OUTLINE_LINES, who)
+        if self.glass_outline_lines < 1:
+            raise ValueError("lathe_prb: parameter 'glass_outline_lines' must be >= 1, "
+                             f"got {self.glass_outline_lines}")
         self.grazing_cosine = typed_property(props, "grazing_cosine", float, GRAZING_COSINE, who)
         if not 0.0 < self.grazing_cosine < 1.0:
             raise ValueError("lathe_prb: parameter 'grazing_cosine' must be in (0, 1), "
@@ -286,11 +248,19 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if self.silhouette and geometry.lathes:
             # Before the interior pass, which consumes the parameters' tangents
             outline = outline_forward(self, scene, _sensor(scene, sensor), seed, self.silhouette_spp)
+            if self._through_glass(scene):
+                outline += glass_outline_forward(self, scene, _sensor(scene, sensor), seed,
+                                                 self.silhouette_spp, self.glass_outline_lines)
         with self._attached_pass_only(seed, _sensor(scene, sensor)):
             image = super().render_forward(scene, params, sensor, seed, spp)
         if outline is not None:
             image += mi.TensorXf(outline[..., : image.shape[2]].astype(np.float32))
         return image
+
+    def _through_glass(self, scene: mi.Scene) -> bool:
+        """Whether the through-glass outline term applies: asked for, and
+        some shape of ``scene`` has a Dirac-delta BSDF."""
+        return self.glass_outlines and scene_lobes(scene)[0]
 
     def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
         geometry = self.geometry(scene)
@@ -306,6 +276,9 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
         if outline:
             outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp, pieces)
+            if self._through_glass(scene):
+                glass_outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp,
+                                       self.glass_outline_lines)
 
     def sample(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
                δL: mi.Spectrum | None, state_in: mi.Spectrum | None, active: mi.Bool,
@@ -557,7 +530,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         if attached:
             stored.append((bs, bsdf_weight, wo_world, sample_2, active_next))  # (as the hit)
-            wo_world, factor = _attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
+            wo_world, factor = attached_direction(bsdf, ctx, si, bs, wo_world, sample_2, active_next,
                                                    self._lobes, self.grazing_cosine, stored)
             bsdf_weight = bsdf_weight * factor
         beta = beta * bsdf_weight

@@ -27,7 +27,7 @@ material point along the outline does not change ``n . dx``, so the
 point's own motion gives the outline's. ``f_in - f_out`` is estimated with camera rays just
 either side of the outline (an outline hidden behind other surfaces gets
 zero difference), traced with the integrator's primal ``sample``.
-Shadows and outlines seen through other surfaces (secondary visibility) are
+Outlines seen through glass are glass_outlines.py's; shadow boundaries are
 not included.
 """
 

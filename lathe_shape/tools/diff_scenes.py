@@ -9,7 +9,7 @@ import math
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "glass_scene", "lathe_scene", "profile_string"]
+__all__ = ["DEFAULT_PROFILE", "DEFAULT_VIEWS", "glass_scene", "lathe_scene", "profile_string", "straw_scene"]
 
 #: A vase-like polyline (both ends on the axis): smooth joints on the bowl,
 #: creases at the rim of the top cap and at the foot.
@@ -129,3 +129,38 @@ def glass_scene(filename: str, kind: str = "polyline", lighting: str = "area", r
     else:
         scene["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(_environment_texture().numpy())}
     return mi.load_dict(scene)
+
+
+#: A tumbler (outer radius 0.5, wall 0.05, base 0.1, 1.2 tall) and a straw
+#: (radius 0.08) standing in it off the axis, out of it at the top.
+TUMBLER_PROFILE = "0 0, 0.5 0, 0.5 1.2, 0.45 1.2, 0.45 0.1, 0 0.1"
+STRAW_PROFILE = "0 0.15, 0.08 0.15, 0.08 1.5, 0 1.5"
+
+
+def straw_scene(resolution: int = 48, max_depth: int = 12, integrator: str = "lathe_prb") -> mi.Scene:
+    """A diffuse straw (lathe ``straw``, :data:`STRAW_PROFILE`) in a clear
+    tumbler (lathe ``glass``, ``dielectric`` 1.5, :data:`TUMBLER_PROFILE`),
+    in front of the smooth emissive backdrop of :func:`glass_scene`, under
+    a uniform sky: below the rim the straw's outlines are seen only through
+    the glass."""
+    transform = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "scene",
+        # (no Russian roulette, as in glass_scene)
+        "integrator": {"type": integrator, "max_depth": max_depth, "rr_depth": max_depth},
+        "camera": {"type": "perspective", "fov": 30,
+                   "to_world": transform().look_at(origin=[0, -4, 1.2], target=[0, 0, 0.6], up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": 16}},
+        "glass": {"type": "lathe", "profile": TUMBLER_PROFILE,
+                  "bsdf": {"type": "dielectric", "int_ior": 1.5}},
+        "straw": {"type": "lathe", "profile": STRAW_PROFILE,
+                  "to_world": transform().translate([0.15, 0.05, 0]),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.3, 0.2]}}},
+        "backdrop": {"type": "rectangle",
+                     "to_world": transform().translate([0, 3, 0.6]).rotate([1, 0, 0], 90).scale([4, 4, 1]),
+                     "emitter": {"type": "area", "radiance": {"type": "bitmap", "data": _smooth_texture(),
+                                                              "raw": True, "filter_type": "bilinear"}}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.4}},
+    })
