@@ -83,6 +83,11 @@ GRAZING_COSINE = 0.2
 SLIDE_FACTOR = 1.25
 
 
+#: Sensors whose image position of a world point the outline terms can ask
+#: (``sample_direction``; a thin lens's through its centre).
+OUTLINE_CAMERAS = frozenset({"PerspectiveCamera", "ThinLensCamera"})
+
+
 def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
 
@@ -182,7 +187,9 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
        - |bool|
        - Add the derivative of the lathes' moving outlines as the camera sees
          them (edge sampling of the exact silhouette,
-         :mod:`lathe_shape.plugin.silhouette`). (Default: true)
+         :mod:`lathe_shape.plugin.silhouette`). With this or
+         ``glass_outlines``, the camera must be ``perspective`` or
+         ``thinlens``. (Default: true)
 
      * - silhouette_spp
        - |int|
@@ -243,42 +250,50 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             lathe.profile_index  # noqa: B018
 
     def render_forward(self, scene: mi.Scene, params, sensor=0, seed=0, spp=0):
-        geometry = self.geometry(scene)
-        outline = None
-        if self.silhouette and geometry.lathes:
-            # Before the interior pass, which consumes the parameters' tangents
-            outline = outline_forward(self, scene, _sensor(scene, sensor), seed, self.silhouette_spp)
-            if self._through_glass(scene):
-                outline += glass_outline_forward(self, scene, _sensor(scene, sensor), seed,
-                                                 self.silhouette_spp, self.glass_outline_lines)
-        with self._attached_pass_only(seed, _sensor(scene, sensor)):
+        camera = _sensor(scene, sensor)
+        silhouette, through_glass = self._outline_terms(scene, camera)
+        # Before the interior pass, which consumes the parameters' tangents
+        terms = []
+        if silhouette:
+            terms.append(outline_forward(self, scene, camera, seed, self.silhouette_spp))
+        if through_glass:
+            terms.append(glass_outline_forward(self, scene, camera, seed, self.silhouette_spp,
+                                               self.glass_outline_lines))
+        with self._attached_pass_only(seed, camera):
             image = super().render_forward(scene, params, sensor, seed, spp)
-        if outline is not None:
-            image += mi.TensorXf(outline[..., : image.shape[2]].astype(np.float32))
+        for term in terms:
+            image += mi.TensorXf(term[..., : image.shape[2]].astype(np.float32))
         return image
 
-    def _through_glass(self, scene: mi.Scene) -> bool:
-        """Whether the through-glass outline term applies: asked for, and
-        some shape of ``scene`` has a Dirac-delta BSDF."""
-        return self.glass_outlines and scene_lobes(scene)[0]
-
     def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
-        geometry = self.geometry(scene)
-        outline = self.silhouette and bool(geometry.lathes)
-        if outline:
+        camera = _sensor(scene, sensor)
+        silhouette, through_glass = self._outline_terms(scene, camera)
+        if silhouette or through_glass:
             # The outline pieces (numpy: it waits for queued kernels) before
             # the interior pass is queued: that pass's kernel then runs while
-            # the outline term is traced
-            camera = _sensor(scene, sensor)
-            pieces = outline_samples(camera, differentiable_lathes(geometry.lathes))
+            # the outline terms are traced
+            pieces = outline_samples(camera, differentiable_lathes(self.geometry(scene).lathes))
             grad_image = np.array(grad_in)
-        with self._attached_pass_only(seed, _sensor(scene, sensor)):
+        with self._attached_pass_only(seed, camera):
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
-        if outline:
+        if silhouette:
             outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp, pieces)
-            if self._through_glass(scene):
-                glass_outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp,
-                                       self.glass_outline_lines)
+        if through_glass:
+            glass_outline_backward(self, scene, camera, grad_image, seed, self.silhouette_spp,
+                                   self.glass_outline_lines)
+
+    def _outline_terms(self, scene: mi.Scene, camera: mi.Sensor) -> tuple[bool, bool]:
+        """Whether the outline term and the through-glass outline term
+        apply: asked for, the scene has lathes (and for the second a
+        Dirac-delta BSDF), and the camera maps points to the image."""
+        silhouette = self.silhouette and bool(self.geometry(scene).lathes)
+        through_glass = self.glass_outlines and bool(self.geometry(scene).lathes) and scene_lobes(scene)[0]
+        if (silhouette or through_glass) and camera.class_name() not in OUTLINE_CAMERAS:
+            raise ValueError(
+                f"lathe_prb: the outline terms (parameters 'silhouette' and 'glass_outlines') need a "
+                f"perspective or thinlens camera, not sensor '{camera.id()}' ({camera.class_name()}): "
+                f"set both to false for the gradient without them")
+        return silhouette, through_glass
 
     def sample(self, mode: dr.ADMode, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
                δL: mi.Spectrum | None, state_in: mi.Spectrum | None, active: mi.Bool,

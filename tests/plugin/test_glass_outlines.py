@@ -15,6 +15,8 @@ Measured (48x48, AD at 2 x 128 spp, FD at 2 x 256 spp, 2026-12-03):
 
 from __future__ import annotations
 
+import re
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -115,3 +117,33 @@ def test_backward_equals_forward(straw):
     np.testing.assert_allclose(backward, forward, rtol=1e-3)
     assert min(abs(f) for f in forward) > 1.0
 
+
+
+def test_outline_terms_need_a_pinhole_camera():
+    """An orthographic camera has no image position for a world point: the
+    outline terms refuse it by name; without them the gradient renders."""
+    transform = mi.ScalarTransform4f
+    scene = {"type": "scene", "integrator": {"type": "lathe_prb", "max_depth": 4},
+             "camera": {"type": "orthographic",
+                        "to_world": transform().look_at(origin=[0, -4, 0.6], target=[0, 0, 0.6],
+                                                        up=[0, 0, 1]),
+                        "film": {"type": "hdrfilm", "width": 16, "height": 16}},
+             "glass": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 1.2, 0 1.2",
+                       "bsdf": {"type": "dielectric"}},
+             "sky": {"type": "constant"}}
+    message = ("lathe_prb: the outline terms (parameters 'silhouette' and 'glass_outlines') need a "
+               "perspective or thinlens camera, not sensor 'camera' (OrthographicCamera): set both to false "
+               "for the gradient without them")
+    loaded = mi.load_dict(scene)
+    params = mi.traverse(loaded)
+    dr.enable_grad(params["glass.points"])
+    params.update()
+    with pytest.raises(ValueError, match=re.escape(message)):
+        dr.backward(dr.sum(mi.render(loaded, params, spp=2)))
+    scene["integrator"].update(silhouette=False, glass_outlines=False)
+    loaded = mi.load_dict(scene)
+    params = mi.traverse(loaded)
+    dr.enable_grad(params["glass.points"])
+    params.update()
+    dr.backward(dr.sum(mi.render(loaded, params, spp=2)))
+    assert np.abs(np.array(dr.grad(params["glass.points"]))).sum() > 0.0
