@@ -25,8 +25,8 @@ joint circle whose tangent is ``T``).
 
 The crossings are found on scan lines, ``lines`` per pixel across the rows
 and as many down the columns, each sampled four times per pixel from a
-random offset: where two neighbouring samples' chains meet lathes a
-different number of times, bisection finds the crossing. A crossing on a
+random offset: where two neighbouring samples' chains meet a different
+sequence of lathes, bisection finds the crossing. A crossing on a
 row stands for ``1 / lines`` of outline length divided by ``|n_x|``, on a
 column by ``|n_y|``; weighted by the balance heuristic between the two,
 each crossing adds (eq. 42)
@@ -41,7 +41,8 @@ primal radiance from vertex ``k`` on either side of the crossing, along
 ``grad_x g``, and ``p`` the probability that a scan line follows the
 chain's branches (eq. 43): half the lines refract at every vertex (reflect
 only where they must: total internal reflection, a mirror), the other
-half reflect at one vertex drawn among the first eight. Chains that reflect
+half reflect at one vertex drawn among the first eight (fewer if
+``max_depth`` is lower). Chains that reflect
 twice where they could refract (a weight ``F^2``, under 1% on glass seen
 off grazing) and outlines of shapes other than lathes seen through glass
 (their image moves with the glass too) are left out.
@@ -182,50 +183,53 @@ def _branch(si: mi.SurfaceInteraction3f, ray: mi.Ray3f, reflect_at: mi.Int32, de
 
 
 @dr.syntax
-def _count(geometry, lathes: list, ray: mi.Ray3f, reflect_at: mi.Int32, vertices: mi.UInt32) -> mi.UInt32:
-    """How many times the chains of ``ray`` meet a lathe (one loop)."""
-    count = dr.zeros(mi.UInt32, dr.width(ray.o))  # Lathe hits so far
+def _signature(geometry, lathes: list, ray: mi.Ray3f, reflect_at: mi.Int32, vertices: mi.UInt32) -> mi.UInt32:
+    """A hash of the sequence of lathes that the chains of ``ray`` meet
+    (one loop): it changes across an outline seen through glass, where a
+    lathe is met once more or less, or another lathe is met instead."""
+    signature = dr.zeros(mi.UInt32, dr.width(ray.o))  # Hash of the lathes met so far
     active = dr.full(mi.Bool, True, dr.width(ray.o))  # The chain goes on
     depth = dr.zeros(mi.UInt32, dr.width(ray.o))  # Vertices so far
     while active:
         si = geometry.ray_intersect(ray, active)
-        on_lathe = active & (_lathe_index(si, lathes) >= 0)
-        count[on_lathe] += 1
+        index = _lathe_index(si, lathes)
+        on_lathe = active & (index >= 0)
+        signature[on_lathe] = signature * 0x9E3779B1 + mi.UInt32(index + 2)
         _, bs, go, _ = _branch(si, ray, reflect_at, depth, on_lathe)
         ray = si.spawn_ray(si.to_world(bs.wo))
         depth += 1
         active = go & (depth < vertices)
-    return count
+    return signature
 
 
-def _counts(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, vertices: int) -> np.ndarray:
-    """How many times each scan lane's chain meets a lathe."""
+def _signatures(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, vertices: int) -> np.ndarray:
+    """:func:`_signature` of each scan lane's chain."""
     ray, reflect_at = lanes.rays(sensor)
-    return np.array(_count(geometry, lathes, ray, reflect_at, dr.opaque(mi.UInt32, vertices)))
+    return np.array(_signature(geometry, lathes, ray, reflect_at, dr.opaque(mi.UInt32, vertices)))
 
 
 @dr.syntax
 def _bisect(geometry, lathes: list, sensor: mi.Sensor, a: _Lanes, b: _Lanes, vertices: int
             ) -> tuple[_Lanes, _Lanes]:
     """Bisection of the pairs ``(a, b)`` (same branches, chains meeting
-    lathes a different number of times) to :data:`_BISECTIONS` halvings,
+    a different sequence of lathes) to :data:`_BISECTIONS` halvings,
     in one kernel."""
     count = len(a.x)
-    # (lanes past count repeat the first: kernels of a few sizes)
+    # (lanes past count repeat the last: kernels of a few sizes)
     padded = np.minimum(np.arange(_bucket(count)), count - 1)
     a, b = a.take(padded), b.take(padded)
     width, height = sensor.film().crop_size()
     scale = mi.ScalarVector2f(1.0 / width, 1.0 / height)
     ray_a, reflect_at = a.rays(sensor)
     last = dr.opaque(mi.UInt32, vertices)
-    count_a = _count(geometry, lathes, ray_a, reflect_at, last)
+    signature_a = _signature(geometry, lathes, ray_a, reflect_at, last)
     x_a = _jit(mi.Point2f, a.x.T)  # The side counted as a
     x_b = _jit(mi.Point2f, b.x.T)  # ... and the other
     step = dr.zeros(mi.UInt32, dr.width(x_a))  # Halvings so far
     while step < _BISECTIONS:
         middle = 0.5 * (x_a + x_b)
         ray, _ = sensor.sample_ray(0.0, 0.5, middle * scale, mi.Point2f(0.5))
-        same = _count(geometry, lathes, ray, reflect_at, last) == count_a
+        same = _signature(geometry, lathes, ray, reflect_at, last) == signature_a
         x_a = dr.select(same, middle, x_a)
         x_b = dr.select(same, x_b, middle)
         step += 1
@@ -260,7 +264,7 @@ def _chain(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, vertices: i
     """The detached chains of the scan lanes, recorded vertex by vertex (one
     loop)."""
     count = len(lanes.x)
-    n = _bucket(count)  # (lanes past count repeat the first)
+    n = _bucket(count)  # (lanes past count repeat the last)
     lanes = lanes.take(np.minimum(np.arange(n), count - 1))
     ray, reflect_at = lanes.rays(sensor)
     size = vertices * n
@@ -305,7 +309,7 @@ def _prefix(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, k: np.ndar
             attached: bool) -> tuple[mi.Ray3f, mi.Spectrum]:
     """The ray that reaches vertex ``k`` (per lane) of the lanes' chains and
     the chain's weight before it (the product of its branches' BSDF values,
-    eq. 43); with ``attached``, the ray follows the profile points (eq. 28)
+    eq. 42); with ``attached``, the ray follows the profile points (eq. 28)
     and the weight is left out."""
     ray, reflect_at = lanes.rays(sensor)
     throughput = dr.ones(mi.Spectrum, dr.width(ray.o))
@@ -380,7 +384,7 @@ class GlassCrossings:
     @staticmethod
     def none(found: int = 0) -> GlassCrossings:
         empty, vectors = np.zeros(0), np.zeros((0, 3))
-        lanes = _Lanes(np.zeros((0, 2)), np.zeros(0, dtype=np.uint32), np.zeros(0, dtype=bool))
+        lanes = _Lanes(np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
         return GlassCrossings(lanes, empty, *(np.zeros(0, dtype=np.int64),) * 3, empty, empty, vectors, empty,
                               np.zeros((0, 2)), vectors, found, found)
 
@@ -413,7 +417,7 @@ def _screen_region(sensor: mi.Sensor, lathes: list) -> tuple[np.ndarray, np.ndar
 def _scan(sensor: mi.Sensor, geometry, lathes: list, rng: np.random.Generator, lines: int,
           vertices: int, reflection_vertices: int) -> tuple[_Lanes, _Lanes]:
     """Pairs of scan lanes ``(a, b)`` on the scan lines whose chains meet
-    lathes a different number of times, bisected. A share of the lines
+    a different sequence of lathes, bisected. A share of the lines
     (:data:`_REFLECTING_SHARE`, at random) reflects at one vertex, drawn
     among the first ``reflection_vertices`` (eq. 43)."""
     low, high = _screen_region(sensor, lathes)
@@ -434,9 +438,9 @@ def _scan(sensor: mi.Sensor, geometry, lathes: list, rng: np.random.Generator, l
         reflect_at = np.where(rng.uniform(size=count) < _REFLECTING_SHARE,
                               rng.integers(0, reflection_vertices, count), -1)
         scan = _Lanes(positions.reshape(-1, 2), np.repeat(reflect_at, along.shape[1]))
-        counts = _counts(geometry, lathes, sensor, scan, vertices).reshape(along.shape)
+        signatures = _signatures(geometry, lathes, sensor, scan, vertices).reshape(along.shape)
         # (each line's last sample starts no pair)
-        change = np.concatenate([counts[:, 1:] != counts[:, :-1], np.zeros((count, 1), bool)], 1)
+        change = np.concatenate([signatures[:, 1:] != signatures[:, :-1], np.zeros((count, 1), bool)], 1)
         first = np.flatnonzero(change.ravel())
         pairs.append((scan.take(first), scan.take(first + 1)))
     if not pairs:
@@ -600,8 +604,8 @@ def glass_outline_crossings(integrator, scene: mi.Scene, sensor: mi.Sensor, seed
 
 def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, crossings: GlassCrossings):
     """The pixel ``(row, column, inside)`` of each crossing, its detached
-    weight ``(f_+ - f_-) / (lines (|g_x| + |g_y|))`` (n, channels) and the
-    attached ``g`` (eq. 41)."""
+    weight ``W (L_+ - L_-) / (p lines (|g_x| + |g_y|))`` (n, channels) and
+    the attached ``g``, whose derivative completes eq. 42."""
     geometry = integrator.geometry(scene)
     lathes = differentiable_lathes(geometry.lathes)
     width, height = sensor.film().crop_size()
@@ -618,9 +622,8 @@ def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, 
     sampler = sensor.sampler().clone()
     # An opaque seed: a new seed is a new kernel input, not a recompilation
     sampler.seed(dr.opaque(mi.UInt32, seed + 104729), dr.width(ray.o))
-    radiance = integrator.sample(mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray,
-                                 depth=mi.UInt32(0), δL=None, δaovs=None, state_in=None,
-                                 active=mi.Bool(True))[0]
+    # (the paths go on from vertex k at its depth, as the image's do)
+    radiance = integrator.sample_from(scene, sampler, ray, _jit(mi.UInt32, np.tile(crossings.k, 2 * spp)))
     values = np.array(throughput * radiance).T.reshape(spp, 2, count, -1).mean(axis=0)
     spread = np.abs(crossings.grad_g).sum(axis=1, keepdims=True)
     weight = (values[1] - values[0]) * crossings.scale[:, None] / np.maximum(spread, 1e-30)

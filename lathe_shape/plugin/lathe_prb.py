@@ -201,7 +201,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
          through Dirac-delta chains (the inner rim, the far wall or a solid
          stem seen through a glass's wall): edge sampling on scan lines,
          :mod:`lathe_shape.plugin.glass_outlines`, docs/method.md eqs.
-         41-42. Only where the scene has a Dirac-delta BSDF. (Default: true)
+         41-43, with ``silhouette_spp`` paths either side of each crossing.
+         Only where the scene has a Dirac-delta BSDF. (Default: true)
 
      * - glass_outline_lines
        - |int|
@@ -272,7 +273,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             # The outline pieces (numpy: it waits for queued kernels) before
             # the interior pass is queued: that pass's kernel then runs while
             # the outline terms are traced
-            pieces = outline_samples(camera, differentiable_lathes(self.geometry(scene).lathes))
+            if silhouette:
+                pieces = outline_samples(camera, differentiable_lathes(self.geometry(scene).lathes))
             grad_image = np.array(grad_in)
         with self._attached_pass_only(seed, camera):
             super().render_backward(scene, params, grad_in, sensor, seed, spp)
@@ -352,24 +354,36 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             sampler = unpaired_lane_sampler(self._seed, count)
         return path, lanes, alpha, sampler
 
-    def _start(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool) -> _Path:
-        """The path state of the camera ray ``ray``."""
+    def _start(self, scene: mi.Scene, geometry: ExactSceneGeometry, ray: mi.Ray3f, active: mi.Bool,
+               depth: mi.UInt32 | None = None) -> _Path:
+        """The path state of the camera ray ``ray``, or with ``depth`` of a
+        ray that leaves a Dirac-delta vertex at that path depth."""
         active = mi.Bool(active)
         ray = mi.Ray3f(dr.detach(ray))
-        if self.hide_emitters:
+        if self.hide_emitters and depth is None:
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's prb
         # Alpha: the camera ray met a surface, or a visible environment
         valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
-        return _Path(ray, mi.UInt32(0), mi.Spectrum(0), mi.Spectrum(1), mi.Float(1), active,
+        depth = mi.UInt32(0) if depth is None else mi.UInt32(depth)
+        return _Path(ray, depth, mi.Spectrum(0), mi.Spectrum(1), mi.Float(1), active,
                      dr.zeros(mi.Interaction3f), mi.Float(1), mi.Bool(True), valid_ray)
 
+    def sample_from(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
+                    depth: mi.UInt32) -> mi.Spectrum:
+        """The primal radiance along ``ray``, which leaves a Dirac-delta
+        vertex of a camera path at path ``depth`` (the paths the image
+        continues there: ``max_depth`` counts from the camera, emitters are
+        seen as after any delta vertex)."""
+        return self.sample_primal(scene, sampler, ray, mi.Bool(True), depth)[0]
+
     @dr.syntax
-    def sample_primal(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
-                      active: mi.Bool) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float], mi.Spectrum]:
+    def sample_primal(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active: mi.Bool,
+                      depth: mi.UInt32 | None = None
+                      ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float], mi.Spectrum]:
         """The primal render: the paths of :meth:`sample_attached`, detached,
-        in one symbolic loop."""
+        in one symbolic loop (from path ``depth``: :meth:`sample_from`)."""
         geometry = self.geometry(scene)
-        path = self._start(scene, geometry, ray, active)  # Path state (see _Path)
+        path = self._start(scene, geometry, ray, active, depth)  # Path state (see _Path)
         while dr.hint(path.active, max_iterations=self.max_depth, label="lathe_prb (Primal)"):
             path = self._vertex(scene, geometry, sampler, path, self.max_depth, False)
         return path.L, path.valid_ray, [], path.L
