@@ -172,3 +172,25 @@ def test_glass_that_is_not_a_lathe():
     integrator.glass_outlines = True
     np.testing.assert_array_equal(with_term, without)
     assert np.abs(with_term).sum() > 0.0
+
+
+def test_paths_from_a_vertex_keep_the_camera_path_depth():
+    """The jump's paths go on at the grazed vertex's depth
+    (``LathePRBIntegrator.sample_from``): ``max_depth`` counts from the
+    camera, so at depth ``max_depth - 1`` a ray that meets a diffuse lathe
+    gathers nothing more (no light sample), while the sky seen directly
+    still counts."""
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "lathe_prb", "max_depth": 3},
+        "vase": {"type": "lathe", "profile": "0 0, 0.5 0, 0.5 1, 0 1", "bsdf": {"type": "diffuse"}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.5}}})
+    integrator = scene.integrator()
+    ray = mi.Ray3f(mi.Point3f([0.0, 0.0], [-3.0, -3.0], [0.5, 3.0]),
+                   mi.Vector3f([0.0, 0.0], [1.0, 0.0], [0.0, 1.0]))
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(0, 2)
+    for depth, lit in ((0, True), (2, False)):
+        # (channels, lanes): lane 0 meets the vase, lane 1 sees the sky
+        radiance = np.array(integrator.sample_from(scene, sampler, ray, mi.UInt32(depth)))
+        assert (radiance[:, 0] > 0.0).all() if lit else (radiance[:, 0] == 0.0).all()
+        np.testing.assert_allclose(radiance[:, 1], 0.5, rtol=1e-6)
