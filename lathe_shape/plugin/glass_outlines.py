@@ -59,6 +59,7 @@ import numpy as np
 from ..kernels.attached import profile_point
 from ..surfaces import kind_of
 from .attached_hits import attach_lathe_hits, attached_direction, differentiable_lathes
+from .edge_terms import add_edge_tangents, backward_edge_terms, jit_array
 
 __all__ = ["GLASS_OUTLINE_LINES", "GlassCrossings", "glass_outline_backward", "glass_outline_crossings",
            "glass_outline_forward"]
@@ -106,28 +107,6 @@ _TANGENT_COSINE = 0.1
 _JOINT_DISTANCE = 1e-3
 
 
-def _aligned(values: np.ndarray, dtype) -> np.ndarray:
-    """A contiguous copy of ``values`` whose memory starts on 64 bytes."""
-    values = np.asarray(values, dtype=dtype)
-    buffer = np.empty(values.nbytes + 64, dtype=np.uint8)
-    start = -buffer.ctypes.data % 64
-    out = buffer[start:start + values.nbytes].view(dtype).reshape(values.shape)
-    out[...] = values
-    return out
-
-
-def _jit(cls, values: np.ndarray):
-    """``values`` (numpy, one row per component for vector types) as a
-    Dr.Jit array of type ``cls``, from memory aligned on 64 bytes: Dr.Jit
-    loads an array that wraps numpy memory with the alignment it happens to
-    have, which is part of the compiled kernel (and of its cache key), so
-    that every call would compile its kernels anew."""
-    scalar = {mi.Float: np.float32, mi.UInt32: np.uint32, mi.Int32: np.int32, mi.Bool: bool}
-    if cls in scalar:
-        return cls(_aligned(values, scalar[cls]))
-    return cls(*(mi.Float(_aligned(row, np.float32)) for row in np.asarray(values)))
-
-
 def _bucket(count: int) -> int:
     """``count`` rounded up to a power of two (at least 256): the size of
     the arrays whose size the kernels hold as a constant (scatter targets),
@@ -157,9 +136,9 @@ class _Lanes:
     def rays(self, sensor: mi.Sensor) -> tuple[mi.Ray3f, mi.Int32]:
         """The camera rays, and the vertex where each reflects."""
         width, height = sensor.film().crop_size()
-        pos = _jit(mi.Point2f, (self.x / [width, height]).T)
+        pos = jit_array(mi.Point2f, (self.x / [width, height]).T)
         ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5))
-        return ray, _jit(mi.Int32, self.reflect_at)
+        return ray, jit_array(mi.Int32, self.reflect_at)
 
 
 def _lathe_index(si: mi.SurfaceInteraction3f, lathes: list) -> mi.Int32:
@@ -223,8 +202,8 @@ def _bisect(geometry, lathes: list, sensor: mi.Sensor, a: _Lanes, b: _Lanes, ver
     ray_a, reflect_at = a.rays(sensor)
     last = dr.opaque(mi.UInt32, vertices)
     signature_a = _signature(geometry, lathes, ray_a, reflect_at, last)
-    x_a = _jit(mi.Point2f, a.x.T)  # The side counted as a
-    x_b = _jit(mi.Point2f, b.x.T)  # ... and the other
+    x_a = jit_array(mi.Point2f, a.x.T)  # The side counted as a
+    x_b = jit_array(mi.Point2f, b.x.T)  # ... and the other
     step = dr.zeros(mi.UInt32, dr.width(x_a))  # Halvings so far
     while step < _BISECTIONS:
         middle = 0.5 * (x_a + x_b)
@@ -313,7 +292,7 @@ def _prefix(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, k: np.ndar
     and the weight is left out."""
     ray, reflect_at = lanes.rays(sensor)
     throughput = dr.ones(mi.Spectrum, dr.width(ray.o))
-    k = _jit(mi.UInt32, k)
+    k = jit_array(mi.UInt32, k)
     # (always ``vertices`` steps: the kernels, and the reverse pass's, are
     # the same whatever the deepest crossing)
     for vertex in range(vertices):
@@ -406,7 +385,7 @@ def _screen_region(sensor: mi.Sensor, lathes: list) -> tuple[np.ndarray, np.ndar
     if np.any(depth <= 0.0):
         return whole
     it = dr.zeros(mi.Interaction3f, len(corners))
-    it.p = _jit(mi.Point3f, corners.T)
+    it.p = jit_array(mi.Point3f, corners.T)
     ds, _ = sensor.sample_direction(it, mi.Point2f(0.5))
     image = np.array(ds.uv, dtype=np.float64).T
     low = np.clip(np.floor(image.min(axis=0)) - 1, 0, [width, height]).astype(int)
@@ -623,7 +602,8 @@ def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, 
     # An opaque seed: a new seed is a new kernel input, not a recompilation
     sampler.seed(dr.opaque(mi.UInt32, seed + 104729), dr.width(ray.o))
     # (the paths go on from vertex k at its depth, as the image's do)
-    radiance = integrator.sample_from(scene, sampler, ray, _jit(mi.UInt32, np.tile(crossings.k, 2 * spp)))
+    depth = jit_array(mi.UInt32, np.tile(crossings.k, 2 * spp))
+    radiance = integrator.sample_from(scene, sampler, ray, depth)
     values = np.array(throughput * radiance).T.reshape(spp, 2, count, -1).mean(axis=0)
     spread = np.abs(crossings.grad_g).sum(axis=1, keepdims=True)
     weight = (values[1] - values[0]) * crossings.scale[:, None] / np.maximum(spread, 1e-30)
@@ -631,18 +611,18 @@ def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, 
     # g = n . (o + t* d - q), attached (the contact held: envelope theorem)
     ray, _ = _prefix(geometry, lathes, sensor, crossings.lanes, crossings.k, vertices, True)
     contact = dr.zeros(mi.Point3f, len(crossings))
-    seg = _jit(mi.UInt32, crossings.seg)
-    u = _jit(mi.Float, crossings.u)
-    phi = _jit(mi.Float, crossings.phi)
+    seg = jit_array(mi.UInt32, crossings.seg)
+    u = jit_array(mi.Float, crossings.u)
+    phi = jit_array(mi.Float, crossings.phi)
     for j, lathe in enumerate(lathes):
-        mine = _jit(mi.Bool, crossings.lathe == j)
+        mine = jit_array(mi.Bool, crossings.lathe == j)
         # (segment 0 on the other lathes' lanes: their segments may not exist here)
         r, z = profile_point(lathe.profile_points, lathe.profile_index, kind_of(lathe.surface).kernel,
                              dr.select(mine, seg, 0), u)
         point = lathe._to_world @ mi.Point3f(r * dr.cos(phi), r * dr.sin(phi), z)
         contact = dr.select(mine, point, contact)
-    normal = _jit(mi.Vector3f, crossings.n.T)
-    t_star = _jit(mi.Float, crossings.t_star)
+    normal = jit_array(mi.Vector3f, crossings.n.T)
+    t_star = jit_array(mi.Float, crossings.t_star)
     direction = ray.d * dr.rsqrt(dr.squared_norm(dr.detach(ray.d)))
     g = dr.dot(normal, ray.o + t_star * direction - contact)
     column = np.floor(crossings.x[:, 0]).astype(np.int64)
@@ -660,13 +640,8 @@ def glass_outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: 
     crossings = glass_outline_crossings(integrator, scene, sensor, seed, lines)
     if len(crossings) == 0:
         return image
-    (row, column, inside), weight, g = _terms(integrator, scene, sensor, seed, spp, crossings)
-    if not dr.grad_enabled(g):
-        return image
-    tangent = np.array(dr.forward_to(g, flags=dr.ADFlag.ClearEdges | dr.ADFlag.ClearInterior))
-    channels = min(3, weight.shape[1])
-    np.add.at(image[..., :channels], (row[inside], column[inside]),
-              weight[inside, :channels] * tangent[inside, None])
+    pixels, weight, g = _terms(integrator, scene, sensor, seed, spp, crossings)
+    add_edge_tangents(image, pixels, weight, g)
     return image
 
 
@@ -677,11 +652,5 @@ def glass_outline_backward(integrator, scene: mi.Scene, sensor: mi.Sensor, grad_
     crossings = glass_outline_crossings(integrator, scene, sensor, seed, lines)
     if len(crossings) == 0:
         return
-    (row, column, inside), weight, g = _terms(integrator, scene, sensor, seed, spp, crossings)
-    if not dr.grad_enabled(g):
-        return
-    channels = min(weight.shape[1], grad_in.shape[2])
-    adjoint = np.zeros(len(weight))
-    adjoint[inside] = np.sum(grad_in[row[inside], column[inside], :channels] * weight[inside, :channels],
-                             axis=1)
-    dr.backward(dr.sum(g * _jit(mi.Float, adjoint)))
+    pixels, weight, g = _terms(integrator, scene, sensor, seed, spp, crossings)
+    backward_edge_terms(pixels, weight, g, grad_in)

@@ -41,6 +41,7 @@ from ..kernels.attached import profile_point
 from ..profiles import bspline as bs
 from ..surfaces import kind_of
 from .attached_hits import differentiable_lathes
+from .edge_terms import add_edge_tangents, backward_edge_terms
 from .shape import LatheShape
 
 __all__ = ["OutlineSamples", "outline_backward", "outline_forward", "outline_radiance_difference",
@@ -363,13 +364,10 @@ def outline_forward(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, s
     channels) for the tangents set on the lathes' ``points``."""
     width, height = sensor.film().crop_size()
     image = None
-    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
+    for pixels, weight, speed in _outline_terms(integrator, scene, sensor, seed, spp):
         if image is None:
             image = np.zeros((height, width, weight.shape[1]))
-        if not dr.grad_enabled(speed):
-            continue
-        tangent = np.array(dr.forward_to(speed, flags=dr.ADFlag.ClearEdges | dr.ADFlag.ClearInterior))
-        np.add.at(image, (row[inside], column[inside]), weight[inside] * tangent[inside, None])
+        add_edge_tangents(image, pixels, weight, speed)
     return np.zeros((height, width, 3)) if image is None else image
 
 
@@ -378,11 +376,5 @@ def outline_backward(integrator, scene: mi.Scene, sensor: mi.Sensor, grad_in: np
     """Reverse mode: accumulate the outline part of the gradient of
     ``sum(grad_in * image)`` into the lathes' ``points`` (outline pieces
     ``samples``, default :func:`outline_samples`)."""
-    for (row, column, inside), weight, speed in _outline_terms(integrator, scene, sensor, seed, spp, samples):
-        if not dr.grad_enabled(speed):
-            continue
-        channels = min(weight.shape[1], grad_in.shape[2])
-        adjoint = np.zeros(len(weight))
-        adjoint[inside] = np.sum(grad_in[row[inside], column[inside], :channels] * weight[inside, :channels],
-                                 axis=1)
-        dr.backward(dr.sum(speed * mi.Float(adjoint.astype(np.float32))))
+    for pixels, weight, speed in _outline_terms(integrator, scene, sensor, seed, spp, samples):
+        backward_edge_terms(pixels, weight, speed, grad_in)
