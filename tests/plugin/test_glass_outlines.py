@@ -152,7 +152,9 @@ def test_outline_terms_need_a_pinhole_camera():
 def test_glass_that_is_not_a_lathe():
     """A diffuse lathe behind a glass sphere (a Dirac delta that is not a
     lathe): the through-glass term finds no chain through a lathe and adds
-    nothing; the gradient equals the one without the term."""
+    exactly nothing, and the gradient equals the one without the term (to
+    the float32 summation order of the interior pass, which the kernels'
+    grouping may change: 1e-7 seen)."""
     transform = mi.ScalarTransform4f
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "lathe_prb", "max_depth": 6},
@@ -166,11 +168,20 @@ def test_glass_that_is_not_a_lathe():
     integrator = scene.integrator()
     crossings = glass_outline_crossings(integrator, scene, scene.sensors()[0], seed=0)
     assert len(crossings) == 0
+    params = mi.traverse(scene)
+    value = params["vase.points"]
+    dr.enable_grad(value)
+    params.update()
+    dr.set_grad(value, mi.Float(np.eye(1, dr.width(value), 4, dtype=np.float32)[0]))
+    term = glass_outline_forward(integrator, scene, scene.sensors()[0], 1, 4)
+    dr.disable_grad(value)
+    params.update()
+    np.testing.assert_array_equal(term, 0.0)
     with_term = forward_gradient(scene, "vase.points", 4, spp=4, seed=1)
     integrator.glass_outlines = False
     without = forward_gradient(scene, "vase.points", 4, spp=4, seed=1)
     integrator.glass_outlines = True
-    np.testing.assert_array_equal(with_term, without)
+    np.testing.assert_allclose(with_term, without, rtol=1e-5, atol=1e-9)
     assert np.abs(with_term).sum() > 0.0
 
 
