@@ -32,6 +32,7 @@ import mitsuba as mi
 from ..kernels.top_level import NO_LATHE
 from .integrator_base import contradicts
 from .line_walk import start_walk
+from .media_segments import segment_transmittance
 
 __all__ = ["NEWTON_STEPS", "POLICY_SAMPLE", "ChainSolution", "chain_vertex", "policy_branch",
            "solve_camera_chain"]
@@ -100,14 +101,16 @@ class ChainSolution:
 
 @dr.syntax
 def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal3f, shape: mi.ShapePtr,
-                       max_vertices: mi.UInt32, active: mi.Bool) -> ChainSolution:
+                       max_vertices: mi.UInt32, active: mi.Bool, media: bool = False) -> ChainSolution:
     """Eqs. 37-39: the camera direction whose ray goes through 1 to
     ``max_vertices`` Dirac-delta vertices (branches by
     :data:`POLICY_SAMPLE`, none contradicting eq. 11) and lands on ``D``
     (point ``p``, geometric normal ``n``, on ``shape``), by Newton's method
     from the straight line with forward-difference Jacobians (eq. 38; kept
     for chord steps while the residual halves), and eq. 39's area from the
-    Jacobian at the solution. ``geometry``: the scene's
+    Jacobian at the solution. With ``media`` the throughput holds the
+    transmittance (eq. 44) of the homogeneous media along the chain (the camera in
+    none). ``geometry``: the scene's
     :class:`~lathe_shape.plugin.scene_geometry.ExactSceneGeometry`. One
     query per loop iteration: the lathe traversal is compiled once."""
     width = dr.width(p)
@@ -129,7 +132,8 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
     walk = start_walk(width)                 # Its line and last lathe crossing
     m = mi.UInt32(0)                         # Vertices of the chain being traced
     branch = mi.Float(1.0)                   # Its branch probabilities' product
-    throughput = mi.Spectrum(1.0)            # ... and BSDF values' product
+    throughput = mi.Spectrum(1.0)            # ... and BSDF values' product (and transmittances)
+    medium = dr.zeros(mi.MediumPtr, width)   # ... medium of its current segment (with media)
     q0 = mi.Point3f(0.0)                     # Landing points on D's tangent plane: trace 0
     q1 = mi.Point3f(0.0)                     # ... trace 1
     m0 = mi.UInt32(0)                        # Trace 0's vertex count
@@ -149,6 +153,9 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
     while going:
         si, walk, _ = geometry.walk_and_test(ray, going, walk)
         valid = si.is_valid()
+        if dr.hint(media, mode="scalar"):
+            # Eq. 44: the segment's transmittance
+            throughput[going & valid] *= segment_transmittance(medium, ray.o, si.t, going & valid)
         bsdf = si.bsdf(ray)
         delta = valid & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
         through = going & delta & (m < max_vertices)
@@ -159,6 +166,8 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
         branch[through] *= bs.pdf
         throughput[through] *= weight * bs.pdf
         m[through] += 1
+        if dr.hint(media, mode="scalar"):
+            medium[through & si.is_medium_transition()] = si.target_medium(wo)
         next_ray = si.spawn_ray(wo)
 
         # ---- A chain ends: its landing point on D's tangent plane ----
@@ -232,4 +241,6 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
         m[restart] = 0
         branch[restart] = 1.0
         throughput[restart] = 1.0
+        if dr.hint(media, mode="scalar"):
+            medium[restart] = dr.zeros(mi.MediumPtr, width)
     return ChainSolution(found, d_found, m0, area, branch_found, throughput_found, wo_found)

@@ -56,6 +56,7 @@ import numpy as np
 from .camera_chain import solve_camera_chain
 from .integrator_base import contradicts, sample_with_fallback, with_geometric_frame
 from .line_walk import start_walk
+from .media_segments import segment_transmittance
 
 __all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe",
            "pure_delta"]
@@ -241,8 +242,13 @@ class CausticTracer:
     traces them (:meth:`render`). Made by the integrator each render."""
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, lathes: list, max_chain: int,
-                 normal_check: str, max_vertices: int | None = None, chain_share: float = 0.3) -> None:
+                 normal_check: str, max_vertices: int | None = None, chain_share: float = 0.3,
+                 media: bool = False) -> None:
         self.lathes = lathes
+        #: Whether the particles and the camera connections carry the
+        #: transmittance of the homogeneous media they cross (``lathe_volpath``;
+        #: the camera and the lights outside every medium).
+        self.media = media
         #: The sensor's pinhole camera (eq. 32).
         self.camera = PinholeCamera(sensor)
         #: Most Dirac-delta vertices between D and the light, and between
@@ -508,6 +514,7 @@ class CausticTracer:
         chain_d = mi.UInt32(0)                    # ... the specular vertices before it
         ds = dr.zeros(mi.DirectionSample3f, size)  # ... its direction to the camera
         importance = mi.Spectrum(0.0)             # ... and the camera's importance there
+        medium = dr.zeros(mi.MediumPtr, size)     # Medium the particle travels in (media: lights in none)
         # The camera connection's shadow ray is tested by the next query, in
         # the same traced lathe traversal as the walked rays (as lathe_path's
         # emitter samples: one traversal compiled, not two)
@@ -521,6 +528,10 @@ class CausticTracer:
             bsdf = si.bsdf(ray)
             delta = pure_delta(bsdf)
             valid = active & si.is_valid()
+            if dr.hint(self.media, mode="scalar"):
+                # Eq. 44: the unscattered part of the light, exp(-sigma_t l)
+                # of the segment just walked (scattered light is path traced)
+                beta[valid] *= segment_transmittance(medium, ray.o, si.t, valid)
             # D: the first smooth surface after at least one specular vertex
             lands = valid & ~delta & (chain >= 1) & ~on_lathe(self.lathes, si)
             landed |= lands
@@ -528,6 +539,11 @@ class CausticTracer:
             chain_d[lands] = chain
             ds_here, importance_here = sensor.sample_direction(mi.Interaction3f(si), sampler.next_2d(), lands)
             ds[lands] = ds_here
+            if dr.hint(self.media, mode="scalar"):
+                # ... and eq. 44 on the straight line
+                # to the camera (used only where nothing is in between)
+                towards = dr.select(si.is_medium_transition(), si.target_medium(ds_here.d), medium)
+                importance_here *= segment_transmittance(towards, si.p, ds_here.dist, lands)
             importance[lands] = importance_here
             # (tested off the film too: only a D whose straight line to the
             # camera is blocked tries a chain; where it is clear and off the
@@ -556,6 +572,8 @@ class CausticTracer:
             correction = adjoint_correction(mi.Frame3f.cos_theta(si.wi), cos_in_geo,
                                             mi.Frame3f.cos_theta(bs.wo), dr.dot(si.n, wo_world))
             beta[active] *= weight * correction
+            if dr.hint(self.media, mode="scalar"):
+                medium[active & si.is_medium_transition()] = si.target_medium(wo_world)
             ray = si.spawn_ray(wo_world)
             chain += 1
             active &= dr.max(beta) > 0.0
@@ -609,7 +627,7 @@ class CausticTracer:
         _, si_d, beta, light_density, chain_d = behind
         limit = self.camera_chain_limit(chain_d)
         solution = solve_camera_chain(geometry, self.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
-                                      limit >= 1)
+                                      limit >= 1, media=self.media)
         through = solution.found
         it = dr.zeros(mi.Interaction3f, dr.width(through))
         it.p = self.camera._origin + solution.d

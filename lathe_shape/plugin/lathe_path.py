@@ -27,17 +27,10 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from .camera_chain import chain_vertex
-from .caustic_paths import (
-    CausticTracer,
-    caustic_weight,
-    chain_length_limit,
-    on_lathe,
-    pure_delta,
-)
-from .deferred_solves import DeferredChainSolves, initial_capacity
+from .caustic_paths import CausticTracer, caustic_weight, on_lathe, pure_delta
+from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import (
     NORMAL_CHECKS,
     ExactLatheSamplingIntegrator,
@@ -48,17 +41,13 @@ from .integrator_base import (
     with_geometric_frame,
 )
 from .line_walk import start_walk
-from .params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS, path_parameters, typed_property
+from .params import path_parameters, typed_property
 from .variants import register_jit_plugin
 
 # (NORMAL_CHECKS, contradicts, mis_weight, sample_with_fallback and
 # with_geometric_frame live in integrator_base; importable from here too)
 __all__ = ["AOV_CHANNELS", "LathePathIntegrator", "NORMAL_CHECKS", "contradicts", "mis_weight", "parse_aovs",
            "register", "sample_with_fallback", "with_geometric_frame"]
-
-#: Why a render has no light-traced caustic paths though ``caustics`` is on.
-NOTHING_TO_TRACE = ("no lathe with a Dirac-delta BSDF, or no light (area, point, spot, directional, "
-                    "environment)")
 
 #: The guide images of the ``aovs`` parameter and their channel names.
 AOV_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "nn": ("nn.X", "nn.Y", "nn.Z")}
@@ -182,20 +171,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                 f"this is '{mi.variant()}'"
             )
         self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
-        self.caustics = typed_property(props, "caustics", bool, True, who)
-        self.caustic_paths = typed_property(props, "caustic_paths", float, CAUSTIC_PATHS, who)
-        if not (self.caustic_paths > 0.0 and self.caustic_paths < 1e6):
-            raise ValueError(
-                f"lathe_path: parameter 'caustic_paths' must be > 0 and finite; got {self.caustic_paths}")
-        self.caustic_camera_chains = typed_property(props, "caustic_camera_chains", float,
-                                                    CAUSTIC_CAMERA_CHAINS, who)
-        if not (0.0 <= self.caustic_camera_chains <= 1.0):
-            raise ValueError("lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; "
-                             f"got {self.caustic_camera_chains}")
-        self.caustic_max_chain = typed_property(props, "caustic_max_chain", int, 8, who)
-        if self.caustic_max_chain < 1:
-            raise ValueError(
-                f"lathe_path: parameter 'caustic_max_chain' must be >= 1; got {self.caustic_max_chain}")
+        #: The caustic parameters (caustic_render.py)
+        self.caustic_settings = CausticSettings.read(props, who)
         #: While a render with caustics runs: (tracer, particles per camera
         #: sample as an opaque Float) for the traced sample().
         self._caustic_render = None
@@ -204,62 +181,15 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         """The caustic tracer of a render of ``scene`` through ``sensor``
         and ``""`` or, where caustics are off or unsupported, ``None`` and
         why."""
-        if not self.caustics:
-            return None, "off"
-        if not mi.is_rgb:
-            return None, f"caustics need an RGB variant (this is '{mi.variant()}')"
-        if sensor.class_name() != "PerspectiveCamera":
-            return None, f"caustics need a perspective sensor (this is '{sensor.class_name()}')"
-        if self.hide_emitters:
-            return None, "caustics are not traced with hide_emitters"
-        if mi.has_flag(sensor.film().flags(), mi.FilmFlags.Special):
-            return None, f"caustics need an RGB film (this is '{sensor.film().class_name()}')"
-        depth = self.max_depth if self.max_depth != 0xFFFFFFFF else 1 << 30
-        chain = chain_length_limit(depth, self.caustic_max_chain)
-        vertices = chain_length_limit(depth, 1 << 30)  # (both chains together)
-        geometry = self.geometry(scene)
-        tracer = CausticTracer(scene, sensor, geometry.lathes, chain, self.normal_check, vertices,
-                               self.caustic_camera_chains)
-        return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
+        return caustic_setup(self, self.caustic_settings, scene, sensor, self.normal_check, media=False)
 
     def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
                develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
         """Mitsuba's render, plus the light-traced caustic paths
         (``caustics``; eq. 32), added to the developed image and to the
         film."""
-        sensor_obj = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
-        # (Mitsuba's render by sensor index calls this again with the sensor:
-        # the inner call renders the paths alone)
-        inner = self._caustic_render is not None
-        tracer, _ = self.caustic_setup(scene, sensor_obj) if develop and not inner else (None, "")
-        if tracer is None:
-            return super().render(scene, sensor, seed, spp, develop, evaluate)
-        film = sensor_obj.film()
-        spp = spp or sensor_obj.sampler().sample_count()
-        crop = film.crop_size()
-        count = max(1, round(self.caustic_paths * spp * crop.x * crop.y))
-        per_camera_sample = count / (spp * crop.x * crop.y)
-        # Eq. 40's rare solves wait in a buffer (deferred_solves.py); one
-        # that overflowed renders again (the same samples) with room for all
-        capacity = initial_capacity(spp * crop.x * crop.y)
-        while True:
-            deferred = DeferredChainSolves(capacity)
-            self._caustic_render = (tracer, dr.opaque(mi.Float, per_camera_sample), deferred)
-            try:
-                super().render(scene, sensor, seed, spp, develop=False, evaluate=True)
-            finally:
-                self._caustic_render = None
-            if not deferred.overflowed():
-                break
-            capacity = deferred.count()
-        deferred.put(tracer, self.geometry(scene), sensor_obj)
-        image = film.develop()
-        caustic = tracer.render(scene, self.geometry(scene), sensor_obj, seed, count,
-                                dr.opaque(mi.Float, per_camera_sample))
-        image = add_to_film(film, image, caustic)
-        if evaluate:
-            dr.eval(image)
-        return image
+        return render_with_caustics(self, self.caustic_settings, super().render, scene, sensor, seed, spp,
+                                    develop, evaluate)
 
     @dr.syntax
     def sample(
@@ -489,44 +419,13 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
 
     def to_string(self) -> str:
         depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
+        settings = self.caustic_settings
         return (
             f"LathePathIntegrator[max_depth={depth}, rr_depth={self.rr_depth}, "
             f"hide_emitters={self.hide_emitters}, normal_check='{self.normal_check}', "
-            f"aovs='{','.join(self.aovs)}', caustics={self.caustics}, caustic_paths={self.caustic_paths}, "
-            f"caustic_max_chain={self.caustic_max_chain}]"
+            f"aovs='{','.join(self.aovs)}', caustics={settings.enabled}, caustic_paths={settings.paths}, "
+            f"caustic_max_chain={settings.max_chain}]"
         )
-
-
-def add_to_film(film: mi.Film, image: mi.TensorXf, caustic: mi.TensorXf) -> mi.TensorXf:
-    """``image`` (developed, channels as ``film.bitmap()`` names them) with
-    ``caustic`` (H, W, 3) added to its RGB channels (its luminance to the Y
-    channel of a luminance film); the film then holds
-    the sum, so that ``film.develop()``, ``film.bitmap()`` and ``film.write()``
-    give it too (its weights become 1)."""
-    total = np.array(image, dtype=np.float32)
-    caustic = np.asarray(caustic, dtype=np.float32)
-    raw = film.bitmap(raw=True)
-    raw_names = [raw.struct_()[index].name for index in range(raw.channel_count())]
-    developed = film.bitmap()
-    names = [developed.struct_()[index].name for index in range(developed.channel_count())]
-    if names[:3] == ["R", "G", "B"]:
-        total[:, :, :3] += caustic
-    else:  # a luminance film (Y, YA): the caustic's luminance (Rec. 709)
-        total[:, :, 0] += caustic @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
-
-    def stored(name: str) -> np.ndarray:
-        # (a luminance film stores RGB and develops their luminance: a grey
-        # of the developed Y develops to that Y)
-        if name == "W":
-            return ones
-        channel = names.index(name if name in names else "Y")
-        return total[:, :, channel][:, :, None]
-
-    storage = np.concatenate([stored(name) for name in raw_names], axis=2)
-    film.prepare(raw_names[raw_names.index("W") + 1:])
-    film.put_block(mi.ImageBlock(mi.TensorXf(storage), film.crop_offset()))
-    return mi.TensorXf(total)
 
 
 def register() -> None:

@@ -41,6 +41,16 @@ lathes included (a lathe is an ``mi.Mesh``, so Mitsuba's own
   ``exp(-sigma_t * length)`` with the segment's length between exact hits;
   in a heterogeneous one it is estimated by ratio tracking.
 
+* Caustics (``caustics``, as ``lathe_path``'s; eqs. 32-40 and 44 of
+  docs/method.md): particles from the lights through the Dirac-delta
+  lathes onto a diffuse surface, joined to the camera, carry the
+  transmittance ``exp(-sigma_t * length)`` of every homogeneous medium they
+  cross: the light that crosses the media without scattering, which is
+  what path tracing samples with them (a path that scatters in a medium is
+  path traced alone). Traced where every medium is homogeneous and the
+  camera and the lights are outside every medium; elsewhere path tracing
+  alone renders the caustics.
+
 Not handled: polarization; the ``normal_check`` policies of ``lathe_path``
 (the shading normals are used as stock Mitsuba uses them).
 """
@@ -51,6 +61,9 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels.top_level import NO_LATHE
+from .camera_chain import chain_vertex
+from .caustic_paths import CausticTracer, caustic_weight, on_lathe, pure_delta
+from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
 from .line_walk import LineWalk, start_walk
 from .params import path_parameters
@@ -94,6 +107,36 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
          camera ray goes on through the area emitters it meets first, and the
          environment seen directly (or only through ``null`` surfaces) is
          black with alpha 0. (Default: false)
+
+     * - caustics
+       - |bool|
+       - Also trace caustic paths from the lights, as ``lathe_path`` does
+         (see there), each particle weighted by the transmittance of the
+         homogeneous media it crosses (coloured glass, a liquid); combined
+         with path tracing by multiple importance sampling, so the image
+         stays unbiased. Traced where every medium is homogeneous and the
+         sensor and the lights have no medium; needs an RGB variant, a
+         ``perspective`` sensor and an RGB film; ignored (path tracing
+         alone) with ``hide_emitters`` or where these do not hold.
+         (Default: true)
+
+     * - caustic_paths
+       - |float|
+       - Light particles per camera sample for ``caustics``. (Default: 0.03)
+
+     * - caustic_camera_chains
+       - |float|
+       - Share (0 to 1) of the particles landing where the camera sees them
+         only through glass that solve for the chain of refractions to the
+         camera; 0 leaves caustics seen through glass to path tracing
+         alone. (Default: 0.3)
+
+     * - caustic_max_chain
+       - |int|
+       - Most specular vertices (``null`` crossings included) between the
+         light and the diffuse surface, and between the diffuse surface and
+         the camera, on a light-traced caustic path (the two together also
+         bounded by ``max_depth`` - 2). (Default: 8)
     """
 
     plugin_name = "lathe_volpath"
@@ -103,6 +146,26 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, self.plugin_name)
+        #: The caustic parameters (caustic_render.py)
+        self.caustic_settings = CausticSettings.read(props, self.plugin_name)
+        #: While a render with caustics runs: (tracer, particles per camera
+        #: sample as an opaque Float, eq. 40's deferred solves) for the traced sample().
+        self._caustic_render = None
+
+    def caustic_setup(self, scene: mi.Scene, sensor: mi.Sensor) -> tuple[CausticTracer | None, str]:
+        """The caustic tracer of a render of ``scene`` through ``sensor``
+        and ``""`` or, where caustics are off or unsupported, ``None`` and
+        why. (The shading normals are used as stock Mitsuba does: the
+        tracer's ``normal_check`` is ``none``.)"""
+        return caustic_setup(self, self.caustic_settings, scene, sensor, "none", media=True)
+
+    def render(self, scene: mi.Scene, sensor: int | mi.Sensor = 0, seed: int = 0, spp: int = 0,
+               develop: bool = True, evaluate: bool = True) -> mi.TensorXf:
+        """Mitsuba's render, plus the light-traced caustic paths
+        (``caustics``; eq. 32), added to the developed image and to the
+        film."""
+        return render_with_caustics(self, self.caustic_settings, super().render, scene, sensor, seed, spp,
+                                    develop, evaluate)
 
     @staticmethod
     def _heterogeneous(scene: mi.Scene) -> bool:
@@ -206,6 +269,22 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         valid_ray = mi.Bool(not self.hide_emitters and scene.environment() is not None)
         n_channels = dr.size_v(mi.Spectrum)
         channel = mi.UInt32(0)               # Colour channel of the free flights (drawn per flight)
+        crossings = mi.UInt32(0)             # Surface interactions so far (null crossings counted)
+        # Eq. 32: caustic paths, also traced from the lights (see render)
+        caustics = self._caustic_render
+        tracer, per_camera_sample, deferred = caustics if caustics is not None else (None, None, None)
+        caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
+        caustic_chain = mi.UInt32(0)         # Its specular vertices after D
+        caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
+        # Eq. 40: D seen through Dirac-delta vertices (camera -> S'.. -> D)
+        camera_chain = mi.Bool(True)         # Path so far: camera, then Dirac deltas on the fixed branch
+        camera_d = mi.Vector3f(ray.d)        # Its camera ray direction
+        camera_branch = mi.Float(1.0)        # ... and branch probabilities' product
+        d_through = mi.Bool(False)           # D was reached through such a chain
+        d_vertices = mi.UInt32(0)            # ... of this many vertices
+        d_p = mi.Point3f(0.0)                # ... D's position
+        d_n = mi.Normal3f(0.0)               # ... geometric normal
+        d_shape = dr.zeros(mi.ShapePtr, width)  # ... and shape
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)
@@ -257,6 +336,32 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
                 seen &= depth > 0
             em_pdf = scene.pdf_emitter_direction(prev, ds, seen & ~delta_prev)
             mis_bsdf = dr.select(delta_prev, 1.0, mis_weight(pdf_prev, em_pdf))
+            if dr.hint(caustics is not None, mode="scalar"):
+                # Eq. 32: a caustic path that the light tracer samples too
+                # (no medium event on it), ending on an area light or the
+                # environment (eq. 35)
+                caustic = seen & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
+                flags = ds.emitter.flags()
+                surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
+                environment = (caustic & ~si.is_valid() & mi.has_flag(flags, mi.EmitterFlags.Infinite)
+                               & ~mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
+                both = surface | environment
+                if both:
+                    p_select, p_area = tracer.light_values(ds.emitter)
+                    density_surface = tracer.light_density(
+                        p_select, p_area, dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
+                    density_environment = tracer.environment_density(
+                        p_select, ds.emitter.pdf_direction(prev, ds, environment), ray.o, ray.d)
+                    light_density = dr.select(environment, density_environment, density_surface)
+                    light_density *= per_camera_sample
+                    # Eq. 40: through a camera chain, solved after the render
+                    # kernel (deferred_solves.py)
+                    defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
+                    limit = tracer.camera_chain_limit(caustic_chain)
+                    deferred.record(defer, beta * mis_bsdf * ds.emitter.eval(si, defer), light_density, limit,
+                                    d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
+                    mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
+                                          caustic_weight(caustic_density, light_density))
             L[seen] += beta * mis_bsdf * emitted
 
             on_surface &= si.is_valid()
@@ -299,6 +404,38 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(on_surface),
                                           sampler.next_2d(on_surface), on_surface)
             on_surface &= bs.pdf > 0.0
+            if dr.hint(caustics is not None, mode="scalar"):
+                # Eq. 32: D, the camera ray's first hit (or, eq. 40, the
+                # first after Dirac deltas on the camera chain's branches),
+                # smooth and sampled with a smooth lobe; then Dirac deltas
+                # only. A medium event ends both chains (lanes not on_surface).
+                wo_world = si.to_world(bs.wo)
+                delta_here = pure_delta(bsdf)
+                cos_in_geo = dr.dot(si.n, -ray.d)
+                bad_in = cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0
+                at_d = mi.Bool(False)
+                if camera_chain & on_surface:
+                    first = crossings == 0
+                    at_d = (camera_chain & on_surface & (crossings <= tracer.max_chain) & ~bad_in
+                            & ~delta_here & (depth + 1 < self.max_depth) & ~on_lathe(tracer.lathes, si)
+                            & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth)
+                            & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
+                    density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
+                                 / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
+                    caustic_density = dr.select(at_d, density_d, caustic_density)
+                    through_d = at_d & ~first
+                    d_through = dr.select(at_d, ~first, d_through)
+                    d_vertices = dr.select(through_d, crossings, d_vertices)
+                    d_p = dr.select(through_d, si.p, d_p)
+                    d_n = dr.select(through_d, si.n, d_n)
+                    d_shape = dr.select(through_d, si.shape, d_shape)
+                    camera_chain &= delta_here & ~bad_in & chain_vertex(si, cos_in_geo, bs, wo_world)
+                    # (the chain before D only: the deltas after it cancel in eq. 32)
+                    camera_branch = dr.select(camera_chain, camera_branch * bs.pdf, camera_branch)
+                camera_chain &= on_surface
+                caustic_open = on_surface & (at_d | (caustic_open & delta_here))
+                caustic_chain = dr.select(at_d, 0, caustic_chain + 1)
+                crossings += 1
             beta[on_surface] *= bsdf_weight
             eta[on_surface] *= bs.eta
             ray[on_surface] = si.spawn_ray(si.to_world(bs.wo))

@@ -1,7 +1,8 @@
-"""Measurements of ``lathe_path``'s light-traced caustics (the library
-behind ``scripts/bench_caustics.py``).
+"""Measurements of the light-traced caustics of ``lathe_path`` and, in
+scenes with media, ``lathe_volpath`` (the library behind
+``scripts/bench_caustics.py``).
 
-For each scene: a reference rendered by plain ``lathe_path``
+For each scene: a reference rendered by the plain integrator
 (``caustics=false``) at many samples per pixel, then plain and caustic
 renders at several sample counts, timed as medians of interleaved runs with
 warm kernels, and their relative mean absolute error (luminance) against the
@@ -52,7 +53,34 @@ SCENES = {
     # POV-Ray's curve kinds, imported: a catmull_rom goblet (thindielectric),
     # a tinted sor bottle (dielectric), a bezier vase and an open bezier cup
     "pov_samples": ("scenes/pov_samples/pov_samples.xml", None),
+    # Media (lathe_volpath, eq. 44): the wine glass filled with red wine, and
+    # the brandy bottle in green glass that absorbs (the tests' green bottle)
+    "wine_glass_filled": ("scenes/wine_glass_filled.xml", None),
+    "green_bottle": ("scenes/brandy_bottle.xml", "green"),
 }
+
+#: The scenes with media.
+MEDIA_SCENES = ("wine_glass_filled", "green_bottle")
+
+#: The green bottle's glass: absorbs blue most, green least.
+GREEN_GLASS = ('<medium type="homogeneous" name="interior"><rgb name="sigma_t" value="0.05, 0.02, 0.3"/>'
+               '<float name="albedo" value="0"/></medium>')
+
+
+def _green_edit(text: str, path: str) -> str:
+    """An edit of scenes/brandy_bottle.xml that fills the bottle's glass
+    with :data:`GREEN_GLASS`."""
+    tag = '<shape type="lathe" id="brandy_bottle">'
+    if tag not in text:
+        raise RuntimeError(f"{path}: the bottle's shape tag was not found")
+    return text.replace(tag, tag + GREEN_GLASS)
+
+
+def integrator_type(scene: mi.Scene) -> str:
+    """``lathe_volpath`` for a scene with media, else ``lathe_path``."""
+    media = any(shape.interior_medium() is not None or shape.exterior_medium() is not None
+                for shape in scene.shapes())
+    return "lathe_volpath" if media else "lathe_path"
 
 
 def _bspline_edit(root: str):
@@ -75,8 +103,10 @@ def load(name: str, root: str, resolution: int) -> mi.Scene:
     from ..tools.scenes import load_scene
 
     path, edit = SCENES[name]
-    return load_scene(os.path.join(root, path), {"integrator": "lathe_path"}, (resolution, resolution),
-                      edit=_bspline_edit(root) if edit == "bspline" else None)
+    edits = {"bspline": _bspline_edit(root), "green": _green_edit, None: None}
+    kind = "lathe_volpath" if name in MEDIA_SCENES else "lathe_path"
+    return load_scene(os.path.join(root, path), {"integrator": kind}, (resolution, resolution),
+                      edit=edits[edit])
 
 
 def glass_mask(scene: mi.Scene) -> np.ndarray:
@@ -89,7 +119,7 @@ def glass_mask(scene: mi.Scene) -> np.ndarray:
 def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:
     """(H, W, 3): the caustic paths alone (light -> specular chain ->
     surface seen by the camera), traced from the lights with weight 1."""
-    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 16})
+    integrator = mi.load_dict({"type": integrator_type(scene), "max_depth": 16})
     sensor = scene.sensors()[0]
     tracer, why = integrator.caustic_setup(scene, sensor)
     if tracer is None:
@@ -101,9 +131,10 @@ def caustic_image(scene: mi.Scene, per_pixel: int, seed: int = 7) -> np.ndarray:
 
 
 def path_integrator(caustics: bool, caustic_paths: float = CAUSTIC_PATHS,
-                    camera_chains: float = CAUSTIC_CAMERA_CHAINS) -> mi.Integrator:
-    """``lathe_path`` (``max_depth`` 16) with or without ``caustics``."""
-    return mi.load_dict({"type": "lathe_path", "max_depth": 16, "caustics": caustics,
+                    camera_chains: float = CAUSTIC_CAMERA_CHAINS, kind: str = "lathe_path") -> mi.Integrator:
+    """``kind`` (``lathe_path`` or ``lathe_volpath``, ``max_depth`` 16) with
+    or without ``caustics``."""
+    return mi.load_dict({"type": kind, "max_depth": 16, "caustics": caustics,
                          "caustic_paths": caustic_paths, "caustic_camera_chains": camera_chains})
 
 
@@ -115,7 +146,7 @@ def chain_solve_rate(scene: mi.Scene, particles: int = 100_000, seed: int = 1) -
     chain: how many})."""
     from ..plugin.camera_chain import solve_camera_chain
 
-    integrator = path_integrator(True, camera_chains=1.0)
+    integrator = path_integrator(True, camera_chains=1.0, kind=integrator_type(scene))
     sensor = scene.sensors()[0]
     tracer, why = integrator.caustic_setup(scene, sensor)
     if tracer is None:
@@ -128,7 +159,7 @@ def chain_solve_rate(scene: mi.Scene, particles: int = 100_000, seed: int = 1) -
     _, si_d, _, _, chain_d = (dr.gather(type(value), value, lanes) for value in behind)
     limit = tracer.camera_chain_limit(chain_d)
     solution = solve_camera_chain(geometry, tracer.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
-                                  limit >= 1)
+                                  limit >= 1, media=tracer.media)
     found = np.array(solution.found, dtype=bool)
     vertices = np.array(solution.vertices)[found]
     return len(found), int(found.sum()), {int(k): int((vertices == k).sum()) for k in np.unique(vertices)}
@@ -164,12 +195,12 @@ def timed_render(scene: mi.Scene, integrator: mi.Integrator, spp: int, seed: int
 
 
 def reference_image(scene: mi.Scene, name: str, resolution: int, spp: int, cache: str) -> np.ndarray:
-    """Plain ``lathe_path`` at ``spp`` (cached in ``cache``), rendered in
+    """The plain integrator at ``spp`` (cached in ``cache``), rendered in
     passes of 256 spp."""
     path = os.path.join(cache, f"caustics_ref_{name}_{resolution}_{spp}.npy")
     if os.path.exists(path):
         return np.load(path)
-    plain = path_integrator(False)
+    plain = path_integrator(False, kind=integrator_type(scene))
     passes = max(1, spp // 256)
     total = None
     for index in range(passes):
@@ -185,8 +216,9 @@ def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[
             caustic_paths: float, camera_chains: float) -> dict:
     """{(method, spp): {"time": median s, region: mean error}} over
     ``repeats`` interleaved rounds (after one warm-up render each)."""
-    integrators = {"plain": path_integrator(False),
-                   "caustics": path_integrator(True, caustic_paths, camera_chains)}
+    kind = integrator_type(scene)
+    integrators = {"plain": path_integrator(False, kind=kind),
+                   "caustics": path_integrator(True, caustic_paths, camera_chains, kind)}
     for integrator in integrators.values():
         timed_render(scene, integrator, spp_list[0], 0)
     runs: dict = {}
@@ -252,7 +284,7 @@ def run_bench(argv: list[str] | None = None) -> int:
     import lathe_shape  # noqa: F401  (registers the plugins)
 
     os.makedirs(args.cache, exist_ok=True)
-    print(f"variant {args.variant}, {args.resolution}x{args.resolution}, reference: plain lathe_path at "
+    print(f"variant {args.variant}, {args.resolution}x{args.resolution}, reference: the plain integrator at "
           f"{args.reference_spp} spp; errors: relative MAE of the luminance; times: medians of "
           f"{args.repeats} interleaved runs")
     for name in args.scenes:
@@ -260,7 +292,8 @@ def run_bench(argv: list[str] | None = None) -> int:
         reference = reference_image(scene, name, args.resolution, args.reference_spp, args.cache)
         masks = regions(scene, reference)
         sizes = {region: int(mask.sum()) for region, mask in masks.items()}
-        print(f"\n== {name}: caustic region {sizes['caustic']} px, glass {sizes['glass']} px")
+        print(f"\n== {name} ({integrator_type(scene)}): caustic region {sizes['caustic']} px, "
+              f"glass {sizes['glass']} px")
         spp_list = sorted(set(args.spp) | {args.target_spp})
         results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths,
                           args.caustic_camera_chains)
@@ -289,7 +322,7 @@ def run_bench(argv: list[str] | None = None) -> int:
             write_exr(os.path.join(args.save, f"{name}_reference.exr"), reference.astype(np.float32))
             for method in ("plain", "caustics"):
                 integrator = path_integrator(method == "caustics", args.caustic_paths,
-                                             args.caustic_camera_chains)
+                                             args.caustic_camera_chains, integrator_type(scene))
                 image, _ = timed_render(scene, integrator, 16, 1)
                 write_exr(os.path.join(args.save, f"{name}_{method}_16spp.exr"), image)
         if args.figure and name == args.scenes[0]:
@@ -298,7 +331,7 @@ def run_bench(argv: list[str] | None = None) -> int:
             frames = []
             for method in ("plain", "caustics"):
                 integrator = path_integrator(method == "caustics", args.caustic_paths,
-                                             args.caustic_camera_chains)
+                                             args.caustic_camera_chains, integrator_type(scene))
                 image, _ = timed_render(scene, integrator, 16, 1)
                 errors = ", ".join(f"{region} {rel_mae(image, reference, mask):.3f}"
                                    for region, mask in masks.items())
@@ -306,7 +339,8 @@ def run_bench(argv: list[str] | None = None) -> int:
                 frames.append(image[..., :3])
             write_png(args.figure, np.concatenate(frames, axis=1))
         if args.unbiased:
-            integrator = path_integrator(True, args.caustic_paths, args.caustic_camera_chains)
+            integrator = path_integrator(True, args.caustic_paths, args.caustic_camera_chains,
+                                         integrator_type(scene))
             image = np.zeros_like(reference)
             passes = max(1, args.unbiased // 256)
             for index in range(passes):

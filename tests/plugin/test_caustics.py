@@ -15,12 +15,14 @@ BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0
 
 
 def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
-               crop: tuple | None = None, pixel_format: str = "rgb", pane: bool = False) -> mi.Scene:
+               crop: tuple | None = None, pixel_format: str = "rgb", pane: bool = False,
+               interiors: dict | None = None) -> mi.Scene:
     """A glass ball (a lathe, radius 1, resting 0.2 above a white floor)
     lit from above by a small square area light (plain or ``textured``), a
     point light or a small sphere light (``light``), seen from the side
     so that the caustic under the ball is on the film; with ``pane``,
-    through a glass pane (a lathe disk 0.1 thick) that fills the view."""
+    through a glass pane (a lathe disk 0.1 thick) that fills the view;
+    ``interiors``: the media inside shapes, by name (``ball``, ``pane``)."""
     film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"},
             "pixel_format": pixel_format}
     if crop:
@@ -44,6 +46,8 @@ def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
                          "to_world": mi.ScalarTransform4f().look_at(
                              origin=centre.tolist(), target=camera.tolist(), up=[0, 0, 1]),
                          "bsdf": {"type": "dielectric", "int_ior": 1.5}}
+    for name, medium in (interiors or {}).items():
+        scene[name]["interior"] = medium
     # Intensity 40 straight down in each case
     if light in ("area", "textured"):
         place = mi.ScalarTransform4f().translate([0.3, 3.0, light_z]).scale([0.25, 0.25, 1])
@@ -336,12 +340,14 @@ def test_crop_window_gets_the_same_caustic():
     assert image_crop.mean() == pytest.approx(image_full.mean(), rel=0.04)
 
 
-@pytest.mark.parametrize("lathe", ["ball", "wine glass", "imported goblet", "mirror ball"])
+@pytest.mark.parametrize("lathe", ["ball", "wine glass", "imported goblet", "mirror ball", "milky ball"])
 def test_white_furnace_with_caustics(lathe):
     """A glass (the ball, a hollow wine glass, or the hollow goblet imported
     from POV-Ray's samples: a catmull_rom curve, the cubic kernel, with its
-    scene's thindielectric) or a mirror (the ball as a perfect conductor)
-    on a white floor (albedo 1)
+    scene's thindielectric), a mirror (the ball as a perfect conductor), or
+    the glass ball filled with a medium that scatters and absorbs nothing
+    (albedo 1, ``lathe_volpath``: its particles carry the unscattered part,
+    eq. 44, path tracing the rest) on a white floor (albedo 1)
     inside a sphere that emits radiance 1 inward and reflects nothing:
     every pixel is 1. Almost all the floor's light comes through the glass
     or straight from the sphere; with many particles (16 per camera sample)
@@ -352,7 +358,7 @@ def test_white_furnace_with_caustics(lathe):
     import os
 
     scenes = os.path.join(os.path.dirname(__file__), "..", "..", "scenes")
-    if lathe in ("ball", "mirror ball"):
+    if lathe in ("ball", "mirror ball", "milky ball"):
         lathe_params = {"profile": BALL}
     elif lathe == "wine glass":  # the example scene's wine glass (18.1 tall), 1.5 tall
         lathe_params = {"filename": os.path.join(scenes, "wine_glass.csv"),
@@ -363,6 +369,8 @@ def test_white_furnace_with_caustics(lathe):
     bsdf = {"type": "thindielectric" if lathe == "imported goblet" else "dielectric", "int_ior": 1.5}
     if lathe == "mirror ball":
         bsdf = {"type": "conductor"}  # (material "none": reflectance 1)
+    if lathe == "milky ball":
+        lathe_params["interior"] = {"type": "homogeneous", "albedo": 1.0, "sigma_t": 1.0}
     camera = mi.ScalarTransform4f().look_at(origin=[0, -3.5, 2.2], target=[0, 0, 0.6], up=[0, 0, 1])
     sensor = {"type": "perspective", "fov": 40, "to_world": camera,
               "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
@@ -376,8 +384,10 @@ def test_white_furnace_with_caustics(lathe):
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse",
                                                         "reflectance": {"type": "rgb", "value": [1, 1, 1]}}}},
         "glass": {"type": "lathe", **lathe_params, "bsdf": bsdf}})
-    integrator = mi.load_dict({"type": "lathe_path", "max_depth": 64, "rr_depth": 64,
+    kind = "lathe_volpath" if lathe == "milky ball" else "lathe_path"
+    integrator = mi.load_dict({"type": kind, "max_depth": 64, "rr_depth": 64,
                                "caustic_paths": 16.0, "caustic_camera_chains": 1.0})
+    assert integrator.caustic_setup(scene, scene.sensors()[0])[0] is not None
     image = luminance(np.array(mi.render(scene, integrator=integrator, spp=64, seed=3), dtype=np.float64))
     assert image.mean() == pytest.approx(1.0, abs=0.01)
     assert np.all(np.abs(image - 1.0) < 0.25)

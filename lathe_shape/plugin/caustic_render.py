@@ -1,0 +1,178 @@
+"""What ``lathe_path`` and ``lathe_volpath`` share for their light-traced
+caustics (``caustics``; eqs. 32-40 of docs/method.md): the parameters, the
+checks that decide whether a render traces them, and the render that runs
+the path tracer's kernel, the deferred solves of eq. 40 and the light
+tracer's pass, and adds the caustic image to the film.
+
+(Functions, not a mixin: Mitsuba's integrator classes are nanobind classes,
+which take no second base.)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .caustic_paths import CausticTracer, chain_length_limit
+from .deferred_solves import DeferredChainSolves, initial_capacity
+from .params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS, typed_property
+
+__all__ = ["CausticSettings", "NOTHING_TO_TRACE", "add_to_film", "caustic_media_problem", "caustic_setup",
+           "render_with_caustics"]
+
+#: Why a render has no light-traced caustic paths though ``caustics`` is on.
+NOTHING_TO_TRACE = ("no lathe with a Dirac-delta BSDF, or no light (area, point, spot, directional, "
+                    "environment)")
+
+
+@dataclass(frozen=True)
+class CausticSettings:
+    """The ``caustics``, ``caustic_paths``, ``caustic_camera_chains`` and
+    ``caustic_max_chain`` parameters (documented with the integrators)."""
+
+    enabled: bool
+    paths: float
+    camera_chains: float
+    max_chain: int
+
+    @classmethod
+    def read(cls, props: mi.Properties, who: str) -> CausticSettings:
+        """The parameters of plugin ``who``, checked; errors name it."""
+        enabled = typed_property(props, "caustics", bool, True, who)
+        paths = typed_property(props, "caustic_paths", float, CAUSTIC_PATHS, who)
+        if not (paths > 0.0 and paths < 1e6):
+            raise ValueError(f"{who}: parameter 'caustic_paths' must be > 0 and finite; got {paths}")
+        chains = typed_property(props, "caustic_camera_chains", float, CAUSTIC_CAMERA_CHAINS, who)
+        if not (0.0 <= chains <= 1.0):
+            raise ValueError(f"{who}: parameter 'caustic_camera_chains' must be in [0, 1]; got {chains}")
+        max_chain = typed_property(props, "caustic_max_chain", int, 8, who)
+        if max_chain < 1:
+            raise ValueError(f"{who}: parameter 'caustic_max_chain' must be >= 1; got {max_chain}")
+        return cls(enabled, paths, chains, max_chain)
+
+
+def caustic_media_problem(scene: mi.Scene, sensor: mi.Sensor) -> str:
+    """Why ``lathe_volpath`` cannot trace caustics in ``scene`` (``""`` when
+    it can): the particles and the camera connections carry the
+    transmittance of homogeneous media in closed form, starting from a
+    camera and lights outside every medium."""
+    for shape in scene.shapes():
+        for medium in (shape.interior_medium(), shape.exterior_medium()):
+            if medium is not None and not medium.is_homogeneous():
+                return (f"caustics need homogeneous media (medium '{medium.id()}' of shape '{shape.id()}' "
+                        "is not)")
+    if sensor.get_medium() is not None:
+        return "caustics need a sensor outside every medium (the sensor has a medium)"
+    for emitter in scene.emitters():
+        if emitter.get_medium() is not None:
+            return f"caustics need lights outside every medium (emitter '{emitter.id()}' has a medium)"
+    return ""
+
+
+def caustic_setup(integrator, settings: CausticSettings, scene: mi.Scene, sensor: mi.Sensor,
+                  normal_check: str, media: bool) -> tuple[CausticTracer | None, str]:
+    """The caustic tracer of ``integrator``'s render of ``scene`` through
+    ``sensor`` and ``""`` or, where caustics are off or unsupported,
+    ``None`` and why. ``media``: the particles and connections carry the
+    transmittance of the media they cross (``lathe_volpath``)."""
+    if not settings.enabled:
+        return None, "off"
+    if not mi.is_rgb:
+        return None, f"caustics need an RGB variant (this is '{mi.variant()}')"
+    if sensor.class_name() != "PerspectiveCamera":
+        return None, f"caustics need a perspective sensor (this is '{sensor.class_name()}')"
+    if integrator.hide_emitters:
+        return None, "caustics are not traced with hide_emitters"
+    if mi.has_flag(sensor.film().flags(), mi.FilmFlags.Special):
+        return None, f"caustics need an RGB film (this is '{sensor.film().class_name()}')"
+    if media:
+        problem = caustic_media_problem(scene, sensor)
+        if problem:
+            return None, problem
+    depth = integrator.max_depth if integrator.max_depth != 0xFFFFFFFF else 1 << 30
+    chain = chain_length_limit(depth, settings.max_chain)
+    vertices = chain_length_limit(depth, 1 << 30)  # (both chains together)
+    geometry = integrator.geometry(scene)
+    tracer = CausticTracer(scene, sensor, geometry.lathes, chain, normal_check, vertices,
+                           settings.camera_chains, media=media)
+    return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
+
+
+def render_with_caustics(integrator, settings: CausticSettings, base_render: Callable, scene: mi.Scene,
+                         sensor: int | mi.Sensor, seed: int, spp: int, develop: bool,
+                         evaluate: bool) -> mi.TensorXf:
+    """``integrator``'s render: Mitsuba's (``base_render``), plus the
+    light-traced caustic paths (eq. 32), added to the developed image and to
+    the film. While the path tracer's kernel is traced,
+    ``integrator._caustic_render`` holds (tracer, particles per camera
+    sample as an opaque Float, the buffer of eq. 40's deferred solves) for
+    its ``sample``."""
+    sensor_obj = scene.sensors()[sensor] if isinstance(sensor, int) else sensor
+    # (Mitsuba's render by sensor index calls this again with the sensor:
+    # the inner call renders the paths alone)
+    inner = integrator._caustic_render is not None
+    tracer, _ = integrator.caustic_setup(scene, sensor_obj) if develop and not inner else (None, "")
+    if tracer is None:
+        return base_render(scene, sensor, seed, spp, develop, evaluate)
+    film = sensor_obj.film()
+    spp = spp or sensor_obj.sampler().sample_count()
+    crop = film.crop_size()
+    count = max(1, round(settings.paths * spp * crop.x * crop.y))
+    per_camera_sample = count / (spp * crop.x * crop.y)
+    # Eq. 40's rare solves wait in a buffer (deferred_solves.py); one
+    # that overflowed renders again (the same samples) with room for all
+    capacity = initial_capacity(spp * crop.x * crop.y)
+    while True:
+        deferred = DeferredChainSolves(capacity)
+        integrator._caustic_render = (tracer, dr.opaque(mi.Float, per_camera_sample), deferred)
+        try:
+            base_render(scene, sensor, seed, spp, develop=False, evaluate=True)
+        finally:
+            integrator._caustic_render = None
+        if not deferred.overflowed():
+            break
+        capacity = deferred.count()
+    geometry = integrator.geometry(scene)
+    deferred.put(tracer, geometry, sensor_obj)
+    image = film.develop()
+    caustic = tracer.render(scene, geometry, sensor_obj, seed, count, dr.opaque(mi.Float, per_camera_sample))
+    image = add_to_film(film, image, caustic)
+    if evaluate:
+        dr.eval(image)
+    return image
+
+
+def add_to_film(film: mi.Film, image: mi.TensorXf, caustic: mi.TensorXf) -> mi.TensorXf:
+    """``image`` (developed, channels as ``film.bitmap()`` names them) with
+    ``caustic`` (H, W, 3) added to its RGB channels (its luminance to the Y
+    channel of a luminance film); the film then holds
+    the sum, so that ``film.develop()``, ``film.bitmap()`` and ``film.write()``
+    give it too (its weights become 1)."""
+    total = np.array(image, dtype=np.float32)
+    caustic = np.asarray(caustic, dtype=np.float32)
+    raw = film.bitmap(raw=True)
+    raw_names = [raw.struct_()[index].name for index in range(raw.channel_count())]
+    developed = film.bitmap()
+    names = [developed.struct_()[index].name for index in range(developed.channel_count())]
+    if names[:3] == ["R", "G", "B"]:
+        total[:, :, :3] += caustic
+    else:  # a luminance film (Y, YA): the caustic's luminance (Rec. 709)
+        total[:, :, 0] += caustic @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
+
+    def stored(name: str) -> np.ndarray:
+        # (a luminance film stores RGB and develops their luminance: a grey
+        # of the developed Y develops to that Y)
+        if name == "W":
+            return ones
+        channel = names.index(name if name in names else "Y")
+        return total[:, :, channel][:, :, None]
+
+    storage = np.concatenate([stored(name) for name in raw_names], axis=2)
+    film.prepare(raw_names[raw_names.index("W") + 1:])
+    film.put_block(mi.ImageBlock(mi.TensorXf(storage), film.crop_offset()))
+    return mi.TensorXf(total)
