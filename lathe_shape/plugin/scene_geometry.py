@@ -69,7 +69,7 @@ from ..kernels.top_level import NO_LATHE, CrossingPlace, LatheSet, ProfileTable,
 from ..surfaces import kind_of
 from .interaction import lathe_interaction
 from .line_walk import LineWalk, continues_line
-from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes
+from .shape import LatheShape, mesh_state, own_mesh_updates, scene_lathes, warn_open_dielectrics
 
 __all__ = ["ExactSceneGeometry", "LatheGroup", "profile_key"]
 
@@ -87,6 +87,7 @@ class ExactSceneGeometry:
         self.state = self.rest_state(scene)
         shapes = scene.shapes()
         self.lathes: list[LatheShape] = [s for s in scene_lathes(scene) if _exact(s)]
+        warn_open_dielectrics(scene)  # (open dielectric sheets no other sheet closes)
         others = [s for s in shapes if not _exact(s)]
         by_kind: dict[object, list[LatheShape]] = {}
         for lathe in self.lathes:

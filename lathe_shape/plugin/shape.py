@@ -39,7 +39,8 @@ from .profile_param import ProfileIndex, profile_index, rebuild_surface, remembe
 from .reference_mesh import check_mesh_budget, reference_bands, reference_steps
 from .variants import register_jit_plugin
 
-__all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes"]
+__all__ = ["FACE_BAND_ATTRIBUTE", "LatheShape", "load_surface", "register", "scene_lathes",
+           "warn_open_dielectrics"]
 
 #: Mitsuba's mesh parameters that hold the reference mesh (written only by
 #: the lathe itself).
@@ -307,18 +308,50 @@ class LatheShape(mi.Mesh):
 
     def _warn_open_dielectric(self, who: str) -> None:
         """An open sheet has no inside: a dielectric (which refracts into
-        an inside) renders it as the boundary of nothing in particular."""
+        an inside) renders it as the boundary of nothing in particular,
+        unless other open sheets close it (the interfaces of a liquid in a
+        glass, each one sheet with both indices, meeting at the fill line):
+        that warning waits for the scene (:func:`warn_open_dielectrics`),
+        where it is given only if a free end of the sheet meets no other
+        sheet's."""
         bsdf = self.bsdf() if getattr(self.profile, "open_sheet", False) else None
         name = str(bsdf).split("[", 1)[0] if bsdf is not None else ""
+        #: The open-dielectric warning waiting for the scene (None: none).
+        self.open_dielectric_warning = None
         if name in ("SmoothDielectric", "RoughDielectric"):
-            mi.Log(mi.LogLevel.Warn,
-                   f"{who}: a {name} BSDF on an open profile (a single sheet, no inside): rays "
-                   f"refract into a solid that is not there; use 'thindielectric' for a thin "
-                   f"glass sheet, or close the profile")
+            message = (f"{who}: a {name} BSDF on an open profile (a single sheet, no inside) whose "
+                       f"ends meet no other open lathe's: rays refract into a solid that is not "
+                       f"there; use 'thindielectric' for a thin glass sheet, or close the profile")
+            if self.free_end_rings() is None:
+                mi.Log(mi.LogLevel.Warn, message)
+            else:
+                self.open_dielectric_warning = message
         elif bsdf is not None and not mi.has_flag(bsdf.flags(), mi.BSDFFlags.BackSide):
             mi.Log(mi.LogLevel.Warn,
                    f"{who}: a one-sided {name} BSDF on an open profile (a single sheet): its "
                    f"inner side renders black; wrap the BSDF in a 'twosided' one")
+
+    def free_end_rings(self) -> list[np.ndarray] | None:
+        """The circles that an open sheet's ends sweep, away from the axis:
+        each as three world points (its centre and its points at 0 and 90
+        degrees), ``(3, 3)``; None for kinds whose ends are not read here
+        (``sor``)."""
+        profile = self.profile
+        if hasattr(profile, "segment_controls"):  # B-spline segments: the curve's ends
+            controls = np.asarray(profile.segment_controls, dtype=np.float64)
+            ends = [(controls[0, 0] + 4.0 * controls[0, 1] + controls[0, 2]) / 6.0,
+                    (controls[-1, 1] + 4.0 * controls[-1, 2] + controls[-1, 3]) / 6.0]
+        elif hasattr(profile, "segments"):  # a polyline
+            ends = [profile.points[profile.segments[0, 0]], profile.points[profile.segments[-1, 1]]]
+        else:
+            return None
+        size = max(float(np.abs(np.asarray(profile.points, dtype=np.float64)).max()), 1e-30)
+        rings = []
+        for r, z in ends:
+            if r > 1e-9 * size:
+                local = np.array([[0.0, 0.0, z, 1.0], [r, 0.0, z, 1.0], [0.0, r, z, 1.0]])
+                rings.append((local @ self.to_world_matrix.T)[:, :3])
+        return rings
 
     def _set_transform(self, matrix: np.ndarray) -> None:
         self.to_world_matrix = np.array(matrix, dtype=np.float64)
@@ -564,6 +597,28 @@ def mesh_state(shape: mi.Shape) -> tuple:
     if isinstance(shape, LatheShape):
         state += (shape.to_world_matrix.tobytes(), id(shape.surface))
     return state
+
+
+def warn_open_dielectrics(scene: mi.Scene) -> list[str]:
+    """Give the open-dielectric warnings of ``scene``'s lathes (see
+    :meth:`LatheShape._warn_open_dielectric`) whose sheets have a free end
+    that meets no other open lathe's free end (within 1e-5 of the larger
+    lathe's size); each lathe warns once. Returns the messages given."""
+    lathes = [lathe for lathe in scene_lathes(scene) if getattr(lathe.profile, "open_sheet", False)]
+    rings = {id(lathe): lathe.free_end_rings() or [] for lathe in lathes}
+    reach = {id(lathe): float(np.linalg.norm(lathe.bbox().extents())) for lathe in lathes}
+    given = []
+    for lathe in lathes:
+        if lathe.open_dielectric_warning is None:
+            continue
+        others = [(other, ring) for other in lathes if other is not lathe for ring in rings[id(other)]]
+        closed = all(any(np.abs(ring - end).max() <= 1e-5 * max(reach[id(lathe)], reach[id(other)])
+                         for other, ring in others) for end in rings[id(lathe)])
+        if not closed:
+            mi.Log(mi.LogLevel.Warn, lathe.open_dielectric_warning)
+            given.append(lathe.open_dielectric_warning)
+        lathe.open_dielectric_warning = None
+    return given
 
 
 def scene_lathes(scene: mi.Scene) -> list[LatheShape]:

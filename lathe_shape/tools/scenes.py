@@ -386,4 +386,7 @@ def load_scene(
         width, height = resolution
         raise SceneError(f"{strict_error}; the resolution {width}x{height} cannot be set in it "
                          "(render without --resolution, or fix the XML)")
+    from ..plugin.shape import warn_open_dielectrics  # (needs a variant: imported here)
+
+    warn_open_dielectrics(scene)  # (open dielectric sheets no other sheet closes)
     return scene

@@ -291,3 +291,35 @@ def test_mesh_buffer_edits_are_refused():
     lathe.set_to_world(mi.ScalarTransform4f().translate([1.5, 0, 0]), scene)
     moved = np.array(mi.traverse(lathe)["vertex_positions"]).reshape(-1, 3)
     assert abs(moved[:, 0].mean() - 1.5) < 0.05
+
+
+OPEN_DIELECTRIC = ("lathe '{}': a SmoothDielectric BSDF on an open profile (a single sheet, no inside) whose "
+                   "ends meet no other open lathe's: rays refract into a solid that is not there; use "
+                   "'thindielectric' for a thin glass sheet, or close the profile")
+
+
+def test_open_dielectric_sheets_closed_by_each_other_do_not_warn():
+    """The filled wine glass's three open dielectric sheets (glass, wine
+    under the glass, wine's top) meet at the fill line: no warning. A lone
+    open dielectric bowl, and two sheets whose ends do not meet, warn once
+    each, naming the lathe."""
+    from conftest import SCENES
+
+    from lathe_shape.plugin.shape import warn_open_dielectrics
+
+    text = (SCENES / "wine_glass_filled.xml").read_text()
+    assert warn_open_dielectrics(load_string_in(SCENES, text, res="16")) == []
+
+    def sheets(*profiles: str) -> mi.Scene:
+        glass = {"type": "dielectric"}
+        return mi.load_dict({"type": "scene", **{
+            f"sheet{index}": {"type": "lathe", "profile": profile, "open": True, "bsdf": glass}
+            for index, profile in enumerate(profiles)}})
+
+    bowl = sheets("0 0, 1 0.2, 1.2 1")
+    assert warn_open_dielectrics(bowl) == [OPEN_DIELECTRIC.format("sheet0")]
+    assert warn_open_dielectrics(bowl) == []  # once
+    # A bowl and a lid meeting at its rim; then a lid 0.01 too high
+    assert warn_open_dielectrics(sheets("0 0, 1 0.2, 1.2 1", "1.2 1, 0 1")) == []
+    assert warn_open_dielectrics(sheets("0 0, 1 0.2, 1.2 1", "1.2 1.01, 0 1.01")) == [
+        OPEN_DIELECTRIC.format("sheet0"), OPEN_DIELECTRIC.format("sheet1")]
