@@ -259,6 +259,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
             em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~bsdf_delta_prev)
             mis_bsdf = dr.select(bsdf_delta_prev, 1.0, mis_weight(bsdf_pdf_prev, em_pdf))
+            emitted = ds.emitter.eval(si, active)
             if dr.hint(caustics is not None, mode="scalar"):
                 # Eq. 32: a caustic path that the light tracer samples too,
                 # ending on an area light or the environment (eq. 35)
@@ -285,11 +286,10 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
                     # the render kernel (deferred_solves.py)
                     defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
                     limit = tracer.camera_chain_limit(caustic_chain)
-                    deferred.record(defer, beta * mis_bsdf * ds.emitter.eval(si, defer), light_density, limit,
+                    deferred.record(defer, beta * mis_bsdf * emitted, light_density, limit,
                                     d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
                     mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
                                           caustic_weight(caustic_density, light_density))
-            emitted = ds.emitter.eval(si, active)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
             active_next = active & valid & (depth + 1 < self.max_depth)

@@ -358,7 +358,7 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
                     # kernel (deferred_solves.py)
                     defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
                     limit = tracer.camera_chain_limit(caustic_chain)
-                    deferred.record(defer, beta * mis_bsdf * ds.emitter.eval(si, defer), light_density, limit,
+                    deferred.record(defer, beta * mis_bsdf * emitted, light_density, limit,
                                     d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
                     mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
                                           caustic_weight(caustic_density, light_density))
