@@ -185,6 +185,18 @@ def caustic_weight(own: mi.Float, other: mi.Float) -> mi.Float:
     return dr.select(dr.isinf(own), 1.0, dr.select(own2 > 0.0, own2 / (own2 + other2), 0.0))
 
 
+def pass_seed(seed: int | mi.UInt32, index: int) -> mi.UInt32:
+    """The light pass ``index``'s sampler seed for the render seed ``seed``,
+    opaque (a new seed compiles no new kernel). ``seed`` is an int from
+    ``mi.render``, or a ``UInt32`` where Mitsuba's C++ calls the
+    integrator's ``render`` (an ``aov`` integrator wrapping it)."""
+    if isinstance(seed, int):
+        return dr.opaque(mi.UInt32, (seed * 7919 + 104729 * (index + 1)) & 0xFFFFFFFF)
+    value = mi.UInt32(seed) * 7919 + 104729 * (index + 1)  # (wraps modulo 2^32, as the int's mask)
+    dr.make_opaque(value)
+    return value
+
+
 class PinholeCamera:
     """What eq. 32 needs of a pinhole ``perspective`` sensor: its position,
     viewing direction and the area of its film at unit distance (read from
@@ -359,7 +371,7 @@ class CausticTracer:
             done += size
             sampler = mi.load_dict({"type": "independent"})
             # (opaque: a new seed or count must not compile new kernels)
-            sampler.seed(dr.opaque(mi.UInt32, (seed * 7919 + 104729 * (index + 1)) & 0xFFFFFFFF), size)
+            sampler.seed(pass_seed(seed, index), size)
             pos, value, splat, behind = self._trace(scene, geometry, sensor, sampler, size, per_camera_sample)
             scale = dr.opaque(mi.Float, pixels / count)
             self._put(block, pos + offset, value * scale, splat)

@@ -109,3 +109,20 @@ def test_parameter_errors_name_lathe_volpath():
     with pytest.raises(Exception) as error:
         mi.load_dict({"type": "lathe_volpath", "caustic_max_chain": 0})
     assert "lathe_volpath: parameter 'caustic_max_chain' must be >= 1; got 0" in str(error.value)
+
+
+def test_caustics_when_an_aov_integrator_wraps_lathe_volpath():
+    """Mitsuba's ``aov`` integrator (the turntable's denoiser guides for an
+    integrator without guides of its own) calls ``render`` from C++ with
+    the seed as a ``UInt32``: the caustic pass takes it (it used to stop
+    with a Dr.Jit error), and the RGB channels are the plain render's."""
+    scene = tinted_scene(pane=False)
+    integrator = mi.load_dict({"type": "lathe_volpath", "max_depth": 12})
+    wrapped = mi.load_dict({"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integrator})
+    guided = np.array(mi.render(scene, integrator=wrapped, spp=8, seed=4), dtype=np.float64)
+    direct = np.array(mi.render(scene, integrator=integrator, spp=8, seed=4), dtype=np.float64)
+    plain = np.array(mi.render(scene, integrator=mi.load_dict({"type": "lathe_volpath", "max_depth": 12,
+                                                               "caustics": False}), spp=8, seed=4))
+    assert guided.shape[-1] == direct.shape[-1] + 6
+    assert np.allclose(guided[..., :3], direct[..., :3], rtol=1e-5, atol=1e-6)
+    assert np.abs(direct[..., :3] - plain[..., :3]).max() > 0.1  # (the caustic is in it)
