@@ -28,8 +28,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .camera_chain import chain_vertex
-from .caustic_paths import CausticTracer, caustic_weight, on_lathe, pure_delta
+from .caustic_path_state import caustic_emitter_factor, caustic_vertex, start_caustic_path
+from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import (
     NORMAL_CHECKS,
@@ -232,18 +232,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         # Eq. 32: caustic paths, also traced from the lights (see render)
         caustics = self._caustic_render
         tracer, per_camera_sample, deferred = caustics if caustics is not None else (None, None, None)
-        caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
-        caustic_chain = mi.UInt32(0)         # Its specular vertices after D
-        caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
-        # Eq. 40: D seen through Dirac-delta vertices (camera -> S'.. -> D)
-        camera_chain = mi.Bool(True)         # Path so far: camera, then policy Dirac deltas only
-        camera_d = mi.Vector3f(ray.d)        # Its camera ray direction
-        camera_branch = mi.Float(1.0)        # ... and branch probabilities' product
-        d_through = mi.Bool(False)           # D was reached through such a chain
-        d_vertices = mi.UInt32(0)            # ... of this many vertices
-        d_p = mi.Point3f(0.0)                # ... D's position
-        d_n = mi.Normal3f(0.0)               # ... geometric normal
-        d_shape = dr.zeros(mi.ShapePtr, dr.width(ray.d))  # ... and shape
+        caustic_path = start_caustic_path(ray.d)  # Eqs. 32, 40: is the path a caustic path?
+                                                  # (caustic_path_state.py)
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)  # as Mitsuba's path
@@ -262,34 +252,11 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             emitted = ds.emitter.eval(si, active)
             if dr.hint(caustics is not None, mode="scalar"):
                 # Eq. 32: a caustic path that the light tracer samples too,
-                # ending on an area light or the environment (eq. 35)
-                caustic = active & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
-                flags = ds.emitter.flags()
-                surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
-                environment = (caustic & ~valid & mi.has_flag(flags, mi.EmitterFlags.Infinite)
-                               & ~mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
-                both = surface | environment
-                # (a symbolic branch: the packets of lanes without such a
-                # path skip the densities and the camera chain's solve)
-                if both:
-                    p_select, p_area = tracer.light_values(ds.emitter)
-                    density_surface = tracer.light_density(
-                        p_select, p_area, dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
-                    density_environment = tracer.environment_density(
-                        p_select, ds.emitter.pdf_direction(si_prev, ds, environment), si_prev.p, ray.d)
-                    light_density = dr.select(environment, density_environment, density_surface)
-                    light_density *= per_camera_sample
-                    # Eq. 40: through a camera chain, the light tracer samples
-                    # this path only if the solver from D finds this very
-                    # chain (only where the light sends particles: not a
-                    # uniform sky); these hits are solved and added after
-                    # the render kernel (deferred_solves.py)
-                    defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
-                    limit = tracer.camera_chain_limit(caustic_chain)
-                    deferred.record(defer, beta * mis_bsdf * emitted, light_density, limit,
-                                    d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
-                    mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
-                                          caustic_weight(caustic_density, light_density))
+                # ending on an area light or the environment (eq. 35); eq. 40
+                # through a camera chain
+                mis_bsdf *= caustic_emitter_factor(tracer, deferred, per_camera_sample, caustic_path, active,
+                                                   ~valid, ds, si, ray, si_prev, si_prev.p,
+                                                   beta * mis_bsdf * emitted)
             L += dr.select(active, beta * mis_bsdf * emitted, 0.0)
 
             active_next = active & valid & (depth + 1 < self.max_depth)
@@ -360,37 +327,11 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             em_value = beta * mis_em * bsdf_val_em * em_weight
 
             if dr.hint(caustics is not None, mode="scalar"):
-                # Eq. 32: D is the camera ray's first hit, smooth and sampled
-                # with a smooth lobe; the chain after it only Dirac deltas.
-                # Eq. 40: or the first such hit after Dirac deltas that took
-                # the camera chain's branches
-                delta_here = pure_delta(bsdf)
-                at_d = mi.Bool(False)
-                # (a symbolic branch: the packets whose paths all left
-                # their camera chain skip it)
-                if camera_chain:
-                    first = depth == 0
-                    at_d = (camera_chain & (depth <= tracer.max_chain) & active_next & ~bad_in & ~delta_here
-                            & ~on_lathe(tracer.lathes, si)
-                            & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth) & (bs.pdf > 0.0)
-                            & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
-                    # (through a chain, the camera's part follows at the light)
-                    density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
-                                 / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
-                    caustic_density = dr.select(at_d, density_d, caustic_density)
-                    through_d = at_d & ~first
-                    d_through = dr.select(at_d, ~first, d_through)
-                    d_vertices = dr.select(through_d, depth, d_vertices)
-                    d_p = dr.select(through_d, si.p, d_p)
-                    d_n = dr.select(through_d, si.n, d_n)
-                    d_shape = dr.select(through_d, si.shape, d_shape)
-                    # (bad_in, redrawn: the fallback policy changed the frame)
-                    camera_chain &= (delta_here & ~bad_in & ~redrawn
-                                     & chain_vertex(si, cos_in_geo, bs, wo_world))
-                    # (the chain before D only: the deltas after it cancel in eq. 32)
-                    camera_branch = dr.select(camera_chain, camera_branch * bs.pdf, camera_branch)
-                caustic_open = at_d | (caustic_open & delta_here)
-                caustic_chain = dr.select(at_d, 0, caustic_chain + 1)
+                # Eqs. 32 and 40: is this vertex D, or one of the chains?
+                # (bad_in, redrawn: the fallback policy changed the frame)
+                caustic_path = caustic_vertex(tracer, caustic_path, mi.Bool(True),
+                                              active_next & (bs.pdf > 0.0), depth, si, bsdf, bs, wo_world,
+                                              cos_in_geo, bad_in, ~redrawn)
 
             # ------------------ Update the loop state ------------------
             valid_ray |= active & valid & ~mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)

@@ -61,8 +61,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..kernels.top_level import NO_LATHE
-from .camera_chain import chain_vertex
-from .caustic_paths import CausticTracer, caustic_weight, on_lathe, pure_delta
+from .caustic_path_state import caustic_emitter_factor, caustic_vertex, start_caustic_path
+from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
 from .line_walk import LineWalk, start_walk
@@ -273,18 +273,8 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         # Eq. 32: caustic paths, also traced from the lights (see render)
         caustics = self._caustic_render
         tracer, per_camera_sample, deferred = caustics if caustics is not None else (None, None, None)
-        caustic_open = mi.Bool(False)        # Path so far: camera, diffuse D, specular vertices
-        caustic_chain = mi.UInt32(0)         # Its specular vertices after D
-        caustic_density = mi.Float(0.0)      # Path tracing's density of it at D (eq. 32)
-        # Eq. 40: D seen through Dirac-delta vertices (camera -> S'.. -> D)
-        camera_chain = mi.Bool(True)         # Path so far: camera, then Dirac deltas on the fixed branch
-        camera_d = mi.Vector3f(ray.d)        # Its camera ray direction
-        camera_branch = mi.Float(1.0)        # ... and branch probabilities' product
-        d_through = mi.Bool(False)           # D was reached through such a chain
-        d_vertices = mi.UInt32(0)            # ... of this many vertices
-        d_p = mi.Point3f(0.0)                # ... D's position
-        d_n = mi.Normal3f(0.0)               # ... geometric normal
-        d_shape = dr.zeros(mi.ShapePtr, width)  # ... and shape
+        caustic_path = start_caustic_path(ray.d)  # Eqs. 32, 40: is the path a caustic path?
+                                                  # (caustic_path_state.py)
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)
@@ -339,29 +329,10 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
             if dr.hint(caustics is not None, mode="scalar"):
                 # Eq. 32: a caustic path that the light tracer samples too
                 # (no medium event on it), ending on an area light or the
-                # environment (eq. 35)
-                caustic = seen & caustic_open & (caustic_chain >= 1) & (caustic_chain <= tracer.max_chain)
-                flags = ds.emitter.flags()
-                surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
-                environment = (caustic & ~si.is_valid() & mi.has_flag(flags, mi.EmitterFlags.Infinite)
-                               & ~mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
-                both = surface | environment
-                if both:
-                    p_select, p_area = tracer.light_values(ds.emitter)
-                    density_surface = tracer.light_density(
-                        p_select, p_area, dr.dot(si.sh_frame.n, ray.d), si.p, -ray.d)
-                    density_environment = tracer.environment_density(
-                        p_select, ds.emitter.pdf_direction(prev, ds, environment), ray.o, ray.d)
-                    light_density = dr.select(environment, density_environment, density_surface)
-                    light_density *= per_camera_sample
-                    # Eq. 40: through a camera chain, solved after the render
-                    # kernel (deferred_solves.py)
-                    defer = both & d_through & (light_density > 0.0) & (tracer.chain_share > 0.0)
-                    limit = tracer.camera_chain_limit(caustic_chain)
-                    deferred.record(defer, beta * mis_bsdf * emitted, light_density, limit,
-                                    d_p, d_n, d_shape, d_vertices, camera_d, caustic_density * camera_branch)
-                    mis_bsdf *= dr.select(d_through, dr.select(defer, 0.0, 1.0),
-                                          caustic_weight(caustic_density, light_density))
+                # environment (eq. 35); eq. 40 through a camera chain
+                mis_bsdf *= caustic_emitter_factor(tracer, deferred, per_camera_sample, caustic_path, seen,
+                                                   ~si.is_valid(), ds, si, ray, prev, ray.o,
+                                                   beta * mis_bsdf * emitted)
             L[seen] += beta * mis_bsdf * emitted
 
             on_surface &= si.is_valid()
@@ -405,36 +376,13 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
                                           sampler.next_2d(on_surface), on_surface)
             on_surface &= bs.pdf > 0.0
             if dr.hint(caustics is not None, mode="scalar"):
-                # Eq. 32: D, the camera ray's first hit (or, eq. 40, the
-                # first after Dirac deltas on the camera chain's branches),
-                # smooth and sampled with a smooth lobe; then Dirac deltas
-                # only. A medium event ends both chains (lanes not on_surface).
-                wo_world = si.to_world(bs.wo)
-                delta_here = pure_delta(bsdf)
+                # Eqs. 32 and 40: is this vertex D, or one of the chains? A
+                # medium event ends both chains (lanes not on_surface).
                 cos_in_geo = dr.dot(si.n, -ray.d)
                 bad_in = cos_in_geo * mi.Frame3f.cos_theta(si.wi) <= 0.0
-                at_d = mi.Bool(False)
-                if camera_chain & on_surface:
-                    first = crossings == 0
-                    at_d = (camera_chain & on_surface & (crossings <= tracer.max_chain) & ~bad_in
-                            & ~delta_here & (depth + 1 < self.max_depth) & ~on_lathe(tracer.lathes, si)
-                            & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Smooth)
-                            & (dr.dot(si.n, wo_world) * mi.Frame3f.cos_theta(bs.wo) > 0.0))
-                    density_d = (dr.select(first, tracer.camera.density(si.p, si.n), 1.0) * bs.pdf
-                                 / dr.maximum(dr.abs(dr.dot(si.n, wo_world)), 1e-12))
-                    caustic_density = dr.select(at_d, density_d, caustic_density)
-                    through_d = at_d & ~first
-                    d_through = dr.select(at_d, ~first, d_through)
-                    d_vertices = dr.select(through_d, crossings, d_vertices)
-                    d_p = dr.select(through_d, si.p, d_p)
-                    d_n = dr.select(through_d, si.n, d_n)
-                    d_shape = dr.select(through_d, si.shape, d_shape)
-                    camera_chain &= delta_here & ~bad_in & chain_vertex(si, cos_in_geo, bs, wo_world)
-                    # (the chain before D only: the deltas after it cancel in eq. 32)
-                    camera_branch = dr.select(camera_chain, camera_branch * bs.pdf, camera_branch)
-                camera_chain &= on_surface
-                caustic_open = on_surface & (at_d | (caustic_open & delta_here))
-                caustic_chain = dr.select(at_d, 0, caustic_chain + 1)
+                caustic_path = caustic_vertex(tracer, caustic_path, on_surface, depth + 1 < self.max_depth,
+                                              crossings, si, bsdf, bs, si.to_world(bs.wo), cos_in_geo, bad_in,
+                                              mi.Bool(True))
                 crossings += 1
             beta[on_surface] *= bsdf_weight
             eta[on_surface] *= bs.eta
