@@ -26,6 +26,7 @@ import numpy as np
 
 from ..kernels.common import LatheGeometry
 from ..profiles import ProfileError, parse_profile_string, read_points, read_profile_options
+from ..profiles.bspline import evaluate as evaluate_bspline
 from ..surfaces import KINDS, BSplineSurface, PolylineSurface, make_surface
 from .interaction import lathe_interaction
 from .params import (
@@ -337,10 +338,9 @@ class LatheShape(mi.Mesh):
         degrees), ``(3, 3)``; None for kinds whose ends are not read here
         (``sor``)."""
         profile = self.profile
-        if hasattr(profile, "segment_controls"):  # B-spline segments: the curve's ends
+        if hasattr(profile, "segment_controls"):  # B-spline segments: the curve's ends (eq. 12)
             controls = np.asarray(profile.segment_controls, dtype=np.float64)
-            ends = [(controls[0, 0] + 4.0 * controls[0, 1] + controls[0, 2]) / 6.0,
-                    (controls[-1, 1] + 4.0 * controls[-1, 2] + controls[-1, 3]) / 6.0]
+            ends = np.stack(evaluate_bspline(controls, [0, len(controls) - 1], [0.0, 1.0]), axis=-1)
         elif hasattr(profile, "segments"):  # a polyline
             ends = [profile.points[profile.segments[0, 0]], profile.points[profile.segments[-1, 1]]]
         else:
