@@ -19,6 +19,7 @@ import numpy as np
 
 from .caustic_paths import CausticTracer, chain_length_limit
 from .deferred_solves import DeferredChainSolves, initial_capacity
+from .media_segments import heterogeneous_medium
 from .params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS, typed_property
 
 __all__ = ["CausticSettings", "NOTHING_TO_TRACE", "add_to_film", "caustic_media_problem", "caustic_setup",
@@ -60,11 +61,10 @@ def caustic_media_problem(scene: mi.Scene, sensor: mi.Sensor) -> str:
     it can): the particles and the camera connections carry the
     transmittance of homogeneous media in closed form, starting from a
     camera and lights outside every medium."""
-    for shape in scene.shapes():
-        for medium in (shape.interior_medium(), shape.exterior_medium()):
-            if medium is not None and not medium.is_homogeneous():
-                return (f"caustics need homogeneous media (medium '{medium.id()}' of shape '{shape.id()}' "
-                        "is not)")
+    heterogeneous = heterogeneous_medium(scene)
+    if heterogeneous is not None:
+        shape, medium = heterogeneous
+        return f"caustics need homogeneous media (medium '{medium.id()}' of shape '{shape.id()}' is not)"
     if sensor.get_medium() is not None:
         return "caustics need a sensor outside every medium (the sensor has a medium)"
     for emitter in scene.emitters():

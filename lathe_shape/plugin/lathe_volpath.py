@@ -66,6 +66,7 @@ from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
 from .line_walk import LineWalk, start_walk
+from .media_segments import heterogeneous_medium
 from .params import path_parameters
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
@@ -171,11 +172,7 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
     def _heterogeneous(scene: mi.Scene) -> bool:
         """Whether any shape bounds a medium that is not homogeneous (null
         collisions must then be handled)."""
-        for shape in scene.shapes():
-            for medium in (shape.interior_medium(), shape.exterior_medium()):
-                if medium is not None and not medium.is_homogeneous():
-                    return True
-        return False
+        return heterogeneous_medium(scene) is not None
 
     @dr.syntax
     def transmittance(self, geometry: ExactSceneGeometry, sampler: mi.Sampler, ref: mi.Interaction3f,

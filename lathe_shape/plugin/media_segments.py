@@ -8,7 +8,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["segment_transmittance"]
+__all__ = ["heterogeneous_medium", "segment_transmittance"]
 
 
 def segment_transmittance(medium: mi.MediumPtr, p: mi.Point3f, length: mi.Float,
@@ -22,3 +22,13 @@ def segment_transmittance(medium: mi.MediumPtr, p: mi.Point3f, length: mi.Float,
     mei.medium = medium
     _, _, sigma_t = medium.get_scattering_coefficients(mei, inside)
     return dr.select(inside, dr.exp(-sigma_t * length), 1.0)
+
+
+def heterogeneous_medium(scene: mi.Scene) -> tuple[mi.Shape, mi.Medium] | None:
+    """The first (shape, medium) of ``scene`` whose medium (interior or
+    exterior) is not homogeneous, or None."""
+    for shape in scene.shapes():
+        for medium in (shape.interior_medium(), shape.exterior_medium()):
+            if medium is not None and not medium.is_homogeneous():
+                return shape, medium
+    return None
