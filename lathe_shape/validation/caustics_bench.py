@@ -57,22 +57,25 @@ SCENES = {
     # the brandy bottle in green glass that absorbs (the tests' green bottle)
     "wine_glass_filled": ("scenes/wine_glass_filled.xml", None),
     "green_bottle": ("scenes/brandy_bottle.xml", "green"),
+    # ... and the paper's B-spline glass in the same green glass (the
+    # degree-6 kernel under eq. 44)
+    "green_bspline": ("scenes/wine_glass.xml", "green_bspline"),
 }
 
 #: The scenes with media.
-MEDIA_SCENES = ("wine_glass_filled", "green_bottle")
+MEDIA_SCENES = ("wine_glass_filled", "green_bottle", "green_bspline")
 
 #: The green bottle's glass: absorbs blue most, green least.
 GREEN_GLASS = ('<medium type="homogeneous" name="interior"><rgb name="sigma_t" value="0.05, 0.02, 0.3"/>'
                '<float name="albedo" value="0"/></medium>')
 
 
-def _green_edit(text: str, path: str) -> str:
-    """An edit of scenes/brandy_bottle.xml that fills the bottle's glass
-    with :data:`GREEN_GLASS`."""
-    tag = '<shape type="lathe" id="brandy_bottle">'
+def _green_edit(text: str, path: str, tag: str = '<shape type="lathe" id="brandy_bottle">') -> str:
+    """An edit of scenes/brandy_bottle.xml (or of the scene whose lathe
+    opens with ``tag``) that fills the lathe's glass with
+    :data:`GREEN_GLASS`."""
     if tag not in text:
-        raise RuntimeError(f"{path}: the bottle's shape tag was not found")
+        raise RuntimeError(f"{path}: the lathe's shape tag {tag} was not found")
     return text.replace(tag, tag + GREEN_GLASS)
 
 
@@ -103,7 +106,11 @@ def load(name: str, root: str, resolution: int) -> mi.Scene:
     from ..tools.scenes import load_scene
 
     path, edit = SCENES[name]
-    edits = {"bspline": _bspline_edit(root), "green": _green_edit, None: None}
+    bspline = _bspline_edit(root)
+
+    def green_bspline(text: str, path: str) -> str:
+        return _green_edit(bspline(text, path), path, '<shape type="lathe" id="wine_glass">')
+    edits = {"bspline": bspline, "green": _green_edit, "green_bspline": green_bspline, None: None}
     kind = "lathe_volpath" if name in MEDIA_SCENES else "lathe_path"
     return load_scene(os.path.join(root, path), {"integrator": kind}, (resolution, resolution),
                       edit=edits[edit])

@@ -12,17 +12,25 @@ import numpy as np
 import pytest
 
 BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0.0, np.pi, 65))
+BSPLINE_BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}" for t in np.linspace(0.0, np.pi, 13))
+#: POV-Ray's Catmull-Rom kind: 13 points on the circle and a guide point
+#: beyond each end
+CATMULL_ROM_BALL = ", ".join(f"{np.sin(t):.6f} {1.2 - np.cos(t):.6f}"
+                             for t in np.linspace(-np.pi / 12, 13 * np.pi / 12, 15))
+BALLS = {"polyline": BALL, "bspline": BSPLINE_BALL, "catmull_rom": CATMULL_ROM_BALL}
 
 
 def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
                crop: tuple | None = None, pixel_format: str = "rgb", pane: bool = False,
-               interiors: dict | None = None) -> mi.Scene:
+               interiors: dict | None = None, kind: str = "polyline") -> mi.Scene:
     """A glass ball (a lathe, radius 1, resting 0.2 above a white floor)
     lit from above by a small square area light (plain or ``textured``), a
     point light or a small sphere light (``light``), seen from the side
     so that the caustic under the ball is on the film; with ``pane``,
     through a glass pane (a lathe disk 0.1 thick) that fills the view;
-    ``interiors``: the media inside shapes, by name (``ball``, ``pane``)."""
+    ``interiors``: the media inside shapes, by name (``ball``, ``pane``);
+    ``kind``: the ball's (:data:`BALLS`; ``bspline``: 13 control points on
+    the polyline's circle, a slightly smaller ball)."""
     film = {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"},
             "pixel_format": pixel_format}
     if crop:
@@ -35,7 +43,8 @@ def ball_scene(light: str = "area", res: int = 48, light_z: float = 5.0,
                    "film": film, "sampler": {"type": "independent"}},
         "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().scale([8, 8, 1]),
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.7]}}},
-        "ball": {"type": "lathe", "profile": BALL, "mesh_segments": 128,
+        "ball": {"type": "lathe", "mesh_segments": 128,
+                 "profile": BALLS[kind], "kind": kind,
                  "bsdf": {"type": "dielectric", "int_ior": 1.33}},
         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [0.05, 0.05, 0.05]}},
     }
