@@ -190,9 +190,7 @@ def pass_seed(seed: int | mi.UInt32, index: int) -> mi.UInt32:
     opaque (a new seed compiles no new kernel). ``seed`` is an int from
     ``mi.render``, or a ``UInt32`` where Mitsuba's C++ calls the
     integrator's ``render`` (an ``aov`` integrator wrapping it)."""
-    if isinstance(seed, int):
-        return dr.opaque(mi.UInt32, (seed * 7919 + 104729 * (index + 1)) & 0xFFFFFFFF)
-    value = mi.UInt32(seed) * 7919 + 104729 * (index + 1)  # (wraps modulo 2^32, as the int's mask)
+    value = mi.UInt32(seed) * 7919 + 104729 * (index + 1)  # (wraps modulo 2^32)
     dr.make_opaque(value)
     return value
 
