@@ -13,8 +13,12 @@ Call :func:`register` by hand only if plugins were cleared.
 
 from __future__ import annotations
 
+# ``_signal``, the C half of ``signal``: a built-in module, imported without
+# running any Python code. (``import signal`` builds its enums first, about
+# half a millisecond in which a Ctrl-C still had Python's default effect: a
+# KeyboardInterrupt traceback from this file, seen on a 16-core machine.)
+import _signal
 import os as _os
-import signal as _signal
 import sys as _sys
 
 

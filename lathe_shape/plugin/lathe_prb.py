@@ -59,7 +59,7 @@ from .lane_sampler import lane_sampler, unpaired_lane_sampler
 from .params import typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
-from .variants import register_jit_plugin
+from .variants import cuda_callable_safe_kernels, register_jit_plugin
 
 __all__ = ["LathePRBIntegrator", "register"]
 
@@ -251,6 +251,16 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             lathe.profile_index  # noqa: B018
 
     def render_forward(self, scene: mi.Scene, params, sensor=0, seed=0, spp=0):
+        with cuda_callable_safe_kernels():
+            image = self._render_forward(scene, params, sensor, seed, spp)
+            dr.eval(image)  # its kernels assembled here, within the flag's scope
+        return image
+
+    def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
+        with cuda_callable_safe_kernels():
+            self._render_backward(scene, params, grad_in, sensor, seed, spp)
+
+    def _render_forward(self, scene: mi.Scene, params, sensor, seed, spp):
         camera = _sensor(scene, sensor)
         silhouette, through_glass = self._outline_terms(scene, camera)
         # Before the interior pass, which consumes the parameters' tangents
@@ -266,7 +276,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
             image += mi.TensorXf(term[..., : image.shape[2]].astype(np.float32))
         return image
 
-    def render_backward(self, scene: mi.Scene, params, grad_in, sensor=0, seed=0, spp=0):
+    def _render_backward(self, scene: mi.Scene, params, grad_in, sensor, seed, spp):
         camera = _sensor(scene, sensor)
         silhouette, through_glass = self._outline_terms(scene, camera)
         if silhouette or through_glass:

@@ -6,14 +6,15 @@ them all)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["MIN_LLVM_VERSION", "check_llvm", "register_jit_plugin"]
+__all__ = ["MIN_LLVM_VERSION", "check_llvm", "cuda_callable_safe_kernels", "register_jit_plugin"]
 
 
 def register_jit_plugin(
@@ -93,3 +94,22 @@ def check_llvm(variant: str | None = None) -> None:
             "with 'Cannot select fminimum'). Fix: 'apt-get install -y libllvm19' "
             "(Dr.Jit finds it by itself), or point DRJIT_LIBLLVM_PATH at libLLVM.so.19.1."
         )
+
+
+@contextlib.contextmanager
+def cuda_callable_safe_kernels() -> Iterator[None]:
+    """Within: on a CUDA variant, Dr.Jit assembles its kernels without
+    ``JitFlag.SpillToSharedMemory``. Dr.Jit 1.5 marks every plain CUDA
+    kernel (any kernel that traces no ray through OptiX) with the PTX
+    pragma ``enable_smem_spilling``, and the PTX assembler of CUDA 13
+    drivers (580, sm_90) refuses it in a kernel that calls functions
+    through the ABI ("Smem spilling should not be enabled when functions use
+    abi"): Dr.Jit aborts the process. The reverse and forward AD passes of a
+    scene with several emitters or BSDFs are such kernels (their method
+    calls are function calls), so the differential passes run inside this.
+    On LLVM variants it does nothing."""
+    if dr.backend_v(mi.Float) != dr.JitBackend.CUDA:
+        yield
+        return
+    with dr.scoped_set_flag(dr.JitFlag.SpillToSharedMemory, False):
+        yield

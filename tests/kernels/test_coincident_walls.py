@@ -35,6 +35,16 @@ reflected ray starts a new line with Mitsuba's spawn offset (about
 1e-4 * (1 + |p|), 1.3e-3 here), larger than the 10 um gap, so the line walk
 cannot help rays that turn at the glass's inner wall.
 
+On CUDA (an H200, 2026-12-04) no walked count is odd either, but the walk
+and each lathe's own count, separate kernels, round some lines' ``t``
+differently (the PTX assembler may fuse a multiply and an add in one kernel
+and not in the other; divisions are approximate): of 18,297 lines the
+glass lost 8 and doubled 3 crossings, 10 um apart and coincident alike
+(the liquid 1 and 1); coincident walls of two kinds lost or doubled
+crossings on 31 of 19,257 lines of the cup and 185 of 16,257 of the
+liquid. These tests are expected failures there (``CUDA_ROUNDING``), and
+docs/limits.md advises the open-sheet model for liquids on CUDA.
+
 Not tested here: "renders like the union solid". With one dielectric per
 closed lathe the naive model cannot be index-matched as a whole: the
 glass's inner wall keeps glass/air (1.5/1) under the liquid, and the
@@ -49,7 +59,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
-from conftest import SCENES
+from conftest import CUDA_ROUNDING, SCENES
 
 from lathe_shape.kernels.bspline import count_crossings_bspline
 from lathe_shape.kernels.polyline import count_crossings_polyline
@@ -165,6 +175,7 @@ def assert_each_crossing_once(stats: dict[str, dict[str, int]]) -> None:
         assert s["unfinished"] == 0, (name, s)
 
 
+@CUDA_ROUNDING
 def test_walls_10um_apart_cross_evenly_once_each():
     """20k lines (a quarter aimed at profile vertices, a quarter grazing
     them): each lathe's walked crossings are its own count of the line (even,
@@ -173,6 +184,7 @@ def test_walls_10um_apart_cross_evenly_once_each():
     assert_each_crossing_once(stats)
 
 
+@CUDA_ROUNDING
 def test_coincident_walls_cross_evenly_once_each():
     """The same with the liquid's wall on the glass's inner wall (the same
     points): the walk orders crossings by t, then lathe (eq. 31), so the
@@ -189,6 +201,7 @@ CUP_LIQUID = ("0 0.1, 0.3 0.1, 0.6 0.1, 0.9 0.1, 0.9 0.1, 0.9 0.3, 0.9 0.6, 0.9 
               "0.9 0.8, 0.6 0.8, 0.3 0.8, 0 0.8")
 
 
+@CUDA_ROUNDING
 def test_coincident_walls_of_two_kinds_cross_evenly_once_each():
     """Coincident walls of a polyline and a B-spline-kernel lathe (the
     walk's single lathes, each its own kernel with its own rounding of the
