@@ -2,7 +2,7 @@
 
 Dispersion needs a spectral variant: under the suite's default RGB variant
 the spectral tests run in a child pytest with
-``LATHE_TEST_VARIANT=llvm_ad_spectral`` (:func:`test_spectral_suite`), and
+``LATHE_TEST_VARIANT=llvm_ad_spectral`` (or ``cuda_ad_spectral``: :func:`test_spectral_suite`), and
 the RGB variant's refusal is tested directly."""
 
 from __future__ import annotations
@@ -40,7 +40,9 @@ def test_rgb_variant_is_refused_naming_spectral_variants():
 @pytest.mark.skipif(SPECTRAL or os.environ.get("LATHE_DISPERSION_CHILD"), reason="the parent runs the child")
 @pytest.mark.slow
 def test_spectral_suite():
-    env = {**os.environ, "LATHE_TEST_VARIANT": "llvm_ad_spectral", "LATHE_DISPERSION_CHILD": "1"}
+    # The spectral variant of the suite's backend (cuda_ad_spectral on a GPU)
+    spectral = mi.variant().split("_")[0] + "_ad_spectral"
+    env = {**os.environ, "LATHE_TEST_VARIANT": spectral, "LATHE_DISPERSION_CHILD": "1"}
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", __file__],
                           env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
