@@ -40,11 +40,12 @@ def add_cluster_options(parser: argparse.ArgumentParser, collect: bool = False) 
     """``--scheduler``, ``--workers`` and (turntables) ``--collect``."""
     group = parser.add_argument_group(
         "Dask cluster (pip install 'lathe_shape[cluster]')")
+    paths = ("the scene (and, unless --collect, the output folder)" if collect else
+             "the scene (this process writes the outputs)")
     group.add_argument(
         "--scheduler", metavar="ADDRESS",
         help="render on the Dask cluster whose scheduler is at ADDRESS (e.g. tcp://host:8786); its "
-        "workers need lathe_shape installed and the scene (and, unless --collect, the output folder) "
-        "under the same paths")
+        f"workers need lathe_shape installed and {paths} under the same paths")
     group.add_argument(
         "--workers", type=int, metavar="N",
         help="render on a local Dask cluster of N worker processes started for the run (each with "

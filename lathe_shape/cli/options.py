@@ -120,8 +120,10 @@ def parse_resolution(text: str) -> tuple[int, int]:
         values = []
     if len(values) == 1:
         values = values * 2
-    if len(values) != 2 or min(values) < 1:
+    if len(values) != 2:
         raise CliError(f"--resolution must look like 640x480 or 512, got {text!r}")
+    if min(values) < 1:
+        raise CliError(f"--resolution needs a width and a height of at least 1 pixel, got {text!r}")
     if max(values) > UINT32_MAX:
         raise CliError(f"--resolution {text!r} is too large: at most {UINT32_MAX} pixels a side")
     return values[0], values[1]

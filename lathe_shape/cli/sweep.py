@@ -5,8 +5,10 @@ or one after another in this process, writing ``sweep_0000.exr``, ... (all
 the film's channels, the render's values in the header) and the CSV index
 ``sweep.csv`` (one row per render: file, the values, render seconds, worker).
 
-``-D key=v1,v2,...`` gives a key several values (split at commas; a key given
-once is the same in every render); the renders are every combination, the
+``-D key=v1,v2,...`` gives a key several values (split at commas; a value
+that holds commas itself, such as a colour, goes in parentheses:
+``-D "sigma_t=(0.5, 0.5, 0.5),(1, 1, 1)"``; a key given once is the same in
+every render); the renders are every combination, the
 last key varying fastest, and each ``--profile`` file with each of them.
 Each EXR is written whole or not at all; the index is written last.
 
@@ -67,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "-D", dest="defines", action="append", metavar="KEY=V1,V2,...",
         help="set an XML <default> parameter to each of the comma-separated values in turn (repeatable: "
-        "every combination is rendered)")
+        "every combination is rendered); a value holding commas (a colour) goes in parentheses: "
+        "'key=(0.5, 0.5, 0.5),(1, 1, 1)'")
     parser.add_argument(
         "--profile", action="append", metavar="FILE",
         help="render with FILE (CSV/JSON profile) as the first lathe's profile (repeatable)")
@@ -89,10 +92,42 @@ def parse_grid(items: list[str] | None) -> dict[str, list[str]]:
             raise CliError(f"-D expects key=v1,v2,..., got {item!r}")
         if key in grid:
             raise CliError(f"-D {key} is given twice: list its values once, separated by commas")
-        grid[key] = [v.strip() for v in values.split(",")]
-        if not all(grid[key]):
-            raise CliError(f"-D {item}: a value is empty")
+        grid[key] = _sweep_values(key, values, item)
     return grid
+
+
+def _sweep_values(key: str, values: str, item: str) -> list[str]:
+    """The comma-separated values of ``-D key=values``; a value that holds
+    commas itself (an RGB triple) is written in parentheses, which are
+    taken off: ``(0.5, 0.5, 0.5),(1, 1, 1)``. :class:`CliError` on an empty
+    value, unbalanced parentheses or a value listed twice."""
+    parts, depth, current = [], 0, ""
+    for char in values:
+        depth += (char == "(") - (char == ")")
+        if depth < 0:
+            break
+        if char == "," and depth == 0:
+            parts.append(current)
+            current = ""
+        else:
+            current += char
+    if depth != 0:
+        raise CliError(f"-D {item}: unbalanced parentheses")
+    parts.append(current)
+    out = []
+    for part in parts:
+        part = part.strip()
+        if part.startswith("(") and part.endswith(")"):
+            part = part[1:-1].strip()
+        out.append(part)
+    if not all(out):
+        raise CliError(f"-D {item}: a value is empty")
+    for value in out:
+        if out.count(value) > 1:
+            raise CliError(
+                f"-D {key} lists the value {value!r} {out.count(value)} times; a value that holds commas "
+                f"(a colour) goes in parentheses: -D '{key}=({values.strip()})'")
+    return out
 
 
 def _renders(args: argparse.Namespace) -> list[tuple[dict[str, str], str | None]]:

@@ -331,6 +331,46 @@ def _mitsuba_message(error: BaseException, path: str) -> str:
     return message
 
 
+#: Mitsuba's source tags in its messages (``[parser.cpp:1718]``, ``[PluginManager]``).
+_SOURCE_TAG = re.compile(r"\[[A-Za-z_]+(?:\.(?:cpp|h):\d+)?\]\s*")
+#: Where in the file Mitsuba's parser was.
+_LOCATION = re.compile(r"(?:At|While loading) (?P<file>.+?) \((?P<position>line \d+, col \d+)\):\s*")
+#: An exception's class name before its message (``ProfileError: ...``).
+_EXCEPTION_NAME = re.compile(r"^[A-Za-z_.]*(?:Error|Exception):\s*")
+
+
+def one_line_load_error(message: str, path: str) -> str:
+    """Mitsuba's (multi-line) error on loading the scene ``path`` as one
+    line: the file and position it names first, then what went wrong, with
+    Mitsuba's source tags, exception class names and list bullets left out
+    (``neg.xml (line 5, col 4): failed to instantiate shape plugin of type
+    "lathe": neg.csv, line 4: negative radius r = -1 (r must be >= 0)``)."""
+    message = _SOURCE_TAG.sub("", message)
+    where = f"{path}: could not load the scene"
+    found = _LOCATION.search(message)
+    if found:
+        where = f"{found['file']} ({found['position']})"
+        message = message[:found.start()] + message[found.end():]
+    text = ""
+    for line in message.splitlines():
+        part = _EXCEPTION_NAME.sub("", line.strip().removeprefix("- ").strip())
+        if part:
+            text = part if not text else text + (" " if text.endswith(":") else ", ") + part
+    return f"{where}: {text}"
+
+
+def _unused_defines_message(message: str, path: str, text: str) -> str | None:
+    """For Mitsuba's "Found unused parameters" (a ``-D`` name the scene
+    does not use): one line naming them and the scene's own parameters."""
+    if "Found unused parameters" not in message:
+        return None
+    unused = re.findall(r"\$(\w+)=", message)
+    declared = sorted(set(re.findall(r"<default\s+name=\"(\w+)\"", text)))
+    listed = ", ".join(declared) if declared else "none"
+    return (f"{path}: -D {', '.join(unused)}: the scene uses no such parameter (its <default> "
+            f"parameters: {listed})")
+
+
 def _still_used(defines: dict[str, str], text: str, edited: str) -> dict[str, str]:
     """``defines`` less those that only the film sizes :func:`set_film_size`
     replaced in ``text`` referred to (``-D res=...`` with a resolution
@@ -377,7 +417,9 @@ def load_scene(
     except Exception as e:  # Mitsuba reports parse/plugin errors as RuntimeError
         if "KeyboardInterrupt" in str(e):  # Ctrl-C in a Python plugin, as Mitsuba's error text
             raise KeyboardInterrupt from e
-        raise SceneError(f"{path}: could not load the scene:\n{_mitsuba_message(e, path)}") from None
+        message = _mitsuba_message(e, path)
+        raise SceneError(_unused_defines_message(message, path, text)
+                         or one_line_load_error(message, path)) from None
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     if strict_error is not None:

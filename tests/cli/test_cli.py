@@ -51,6 +51,9 @@ def test_errors(tmp_path):
     assert variant.returncode == 2 and "unknown variant 'nope'" in variant.stderr
     res = run_cli(str(SCENES / "wine_glass.xml"), "--resolution", "axb")
     assert res.returncode == 2 and "resolution must look like 640x480 or 512, got 'axb'" in res.stderr
+    zero = run_cli(str(SCENES / "wine_glass.xml"), "--resolution", "0x10")
+    assert zero.returncode == 2 and zero.stderr.endswith(
+        "--resolution needs a width and a height of at least 1 pixel, got '0x10'\n")
 
 
 NO_INTEGRATOR = """<scene version="3.0.0">
@@ -85,7 +88,12 @@ def test_more_errors(tmp_path):
     bad = tmp_path / "bad.xml"
     bad.write_text(NO_INTEGRATOR.replace("0 0, 1 0, 1 2, 0 2", "0 0, 1 0, 1 2, 0.5 2"))
     res = run_cli(str(bad), "--resolution", "8x8", "-o", str(tmp_path))
-    assert res.returncode == 2 and f"At {bad} (line" in res.stderr and "profile is not closed" in res.stderr
+    assert res.returncode == 2 and f"{bad} (line" in res.stderr and "profile is not closed" in res.stderr
+    assert res.stderr.count("\n") == 1 and "[parser.cpp" not in res.stderr, res.stderr
+    misspelled = run_cli(str(scene), "-D", "max_depht=4", "--resolution", "8x8", "-o", str(tmp_path / "o"))
+    assert misspelled.returncode == 2 and misspelled.stderr == (
+        f"lathe-render: error: {scene}: -D max_depht: the scene uses no such parameter "
+        "(its <default> parameters: none)\n")
 
 
 COMMANDS = ["lathe_shape.cli.render", "lathe_shape.cli.turntable", "lathe_shape.cli.compare"]
@@ -236,6 +244,7 @@ def test_xml_errors_name_file_and_line(tmp_path, capsys, options):
         stderr = capsys.readouterr().err
         assert code == 2 and stderr.startswith("lathe-render: error: ") and "Traceback" not in stderr
         assert f"{scene} (line {line}, col " in stderr, stderr
+        assert stderr.count("\n") == 1, stderr  # one line: no Mitsuba source tags, no bullet lines
         assert "string" not in stderr.replace('<string name="profile"', "")
     assert not (tmp_path / "out").exists()
 

@@ -211,3 +211,33 @@ def test_sweep_writes_exrs_and_index(tmp_path, capsys):
     first, _ = read_exr(out / "sweep_0000.exr")
     second, _ = read_exr(out / "sweep_0001.exr")
     assert not np.array_equal(first, second)
+
+
+def test_sweep_values_with_commas(tmp_path, capsys):
+    """A ``-D`` value that holds commas (an RGB triple) goes in
+    parentheses; a value listed twice (what ``0.5, 0.5, 0.5`` without them
+    gives) is refused with the hint, before anything renders."""
+    assert sweep.parse_grid(["s=(0.5, 0.5, 0.5),(1, 1, 1)", "n=1,2"]) == {
+        "s": ["0.5, 0.5, 0.5", "1, 1, 1"], "n": ["1", "2"]}
+    filled = str(SCENES / "wine_glass_filled.xml")
+    out = tmp_path / "sweep"
+    code = sweep.main(["--variant", VARIANT, filled, "-o", str(out), "--spp", "1", "--resolution", "8",
+                       "-D", "wine_sigma_t=0.5, 0.5, 0.5"])
+    assert code == 2 and not out.exists()
+    assert capsys.readouterr().err == (
+        "lathe-sweep: error: -D wine_sigma_t lists the value '0.5' 3 times; a value that holds commas "
+        "(a colour) goes in parentheses: -D 'wine_sigma_t=(0.5, 0.5, 0.5)'\n")
+    for item, message in (("a=(1,2", "-D a=(1,2: unbalanced parentheses"),
+                          ("a=1,,2", "-D a=1,,2: a value is empty")):
+        assert sweep.main(["--variant", VARIANT, filled, "-o", str(out), "-D", item]) == 2
+        assert capsys.readouterr().err == f"lathe-sweep: error: {message}\n"
+    code = sweep.main(["--variant", VARIANT, filled, "-o", str(out), "--spp", "1", "--resolution", "8",
+                       "-D", "wine_sigma_t=(0.5, 0.5, 0.5),(0.9, 0.1, 0.1)"])
+    assert code == 0, capsys.readouterr().err
+    with open(out / "sweep.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert [row[:2] for row in rows[1:]] == [["sweep_0000.exr", "0.5, 0.5, 0.5"],
+                                             ["sweep_0001.exr", "0.9, 0.1, 0.1"]]
+    thin, _ = read_exr(out / "sweep_0000.exr")
+    dense, _ = read_exr(out / "sweep_0001.exr")
+    assert not np.array_equal(thin, dense)
