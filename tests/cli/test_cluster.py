@@ -231,13 +231,16 @@ def test_sweep_values_with_commas(tmp_path, capsys):
                           ("a=1,,2", "-D a=1,,2: a value is empty")):
         assert sweep.main(["--variant", VARIANT, filled, "-o", str(out), "-D", item]) == 2
         assert capsys.readouterr().err == f"lathe-sweep: error: {message}\n"
-    code = sweep.main(["--variant", VARIANT, filled, "-o", str(out), "--spp", "1", "--resolution", "8",
-                       "-D", "wine_sigma_t=(0.5, 0.5, 0.5),(0.9, 0.1, 0.1)"])
+    code = sweep.main(["--variant", VARIANT, filled, "-o", str(out), "--spp", "4", "--resolution", "32",
+                       "-D", "wine_sigma_t=(0.05, 0.05, 0.05),(0.9, 0.1, 0.1)"])
     assert code == 0, capsys.readouterr().err
     with open(out / "sweep.csv", newline="") as f:
         rows = list(csv.reader(f))
-    assert [row[:2] for row in rows[1:]] == [["sweep_0000.exr", "0.5, 0.5, 0.5"],
+    assert [row[:2] for row in rows[1:]] == [["sweep_0000.exr", "0.05, 0.05, 0.05"],
                                              ["sweep_0001.exr", "0.9, 0.1, 0.1"]]
-    thin, _ = read_exr(out / "sweep_0000.exr")
-    dense, _ = read_exr(out / "sweep_0001.exr")
-    assert not np.array_equal(thin, dense)
+    # Each triple reached the medium as a colour: a grey wine leaves the
+    # (grey) scene grey, one that absorbs red most turns it cyan
+    grey = read_exr(out / "sweep_0000.exr")[0][..., :3].mean(axis=(0, 1))
+    red_absorbing = read_exr(out / "sweep_0001.exr")[0][..., :3].mean(axis=(0, 1))
+    assert np.ptp(grey) < 1e-6 * grey.mean(), grey
+    assert red_absorbing[0] < 0.99 * red_absorbing[1], red_absorbing
