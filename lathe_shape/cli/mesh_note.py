@@ -23,7 +23,9 @@ def mesh_note(scene, integrator) -> str | None:
     """``None`` when ``integrator`` renders the lathes of ``scene`` exactly
     or the scene has none; else one line saying how many lathes the stock
     integrator renders as their reference meshes, of how many azimuthal
-    steps, and which integrator renders them exactly."""
+    steps, and which integrator renders them exactly (``lathe_volpath``
+    where a lathe bounds a medium, else ``lathe_path``)."""
+    from ..plugin.media_check import MEDIUM_INTEGRATOR, lathe_media
     from ..plugin.shape import scene_lathes
 
     lathes = scene_lathes(scene)
@@ -34,5 +36,7 @@ def mesh_note(scene, integrator) -> str | None:
     count = len(lathes)
     what = "lathe rendered as its" if count == 1 else "lathes rendered as their"
     meshes = "reference mesh" if count == 1 else "reference meshes"
+    # Lathes with media: lathe_path refuses them, lathe_volpath renders them
+    exact = MEDIUM_INTEGRATOR if lathe_media(lathes) else EXACT_INTEGRATOR
     return (f"note: {count} {what} {step_text}-step {meshes} by this stock integrator; "
-            f"{EXACT_INTEGRATOR} renders them exactly (e.g. <integrator type=\"{EXACT_INTEGRATOR}\">)")
+            f"{exact} renders them exactly (e.g. <integrator type=\"{exact}\">)")

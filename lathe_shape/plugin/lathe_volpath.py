@@ -66,6 +66,7 @@ from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
 from .line_walk import LineWalk, start_walk
+from .media_check import refuse_negative_extinction
 from .media_segments import heterogeneous_medium
 from .params import path_parameters
 from .scene_geometry import ExactSceneGeometry
@@ -165,6 +166,7 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         """Mitsuba's render, plus the light-traced caustic paths
         (``caustics``; eq. 32), added to the developed image and to the
         film."""
+        refuse_negative_extinction(scene, self.plugin_name)
         return render_with_caustics(self, self.caustic_settings, super().render, scene, sensor, seed, spp,
                                     develop, evaluate)
 

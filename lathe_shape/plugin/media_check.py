@@ -5,16 +5,20 @@ with an ``interior`` or ``exterior`` medium would render as if the medium
 were absent. Each integrator calls :func:`refuse_media` where it first sees
 the scene's lathes (its ``geometry()``), so such a scene is an error naming
 the lathe, the medium and the integrator that renders media
-(:data:`MEDIUM_INTEGRATOR`).
+(:data:`MEDIUM_INTEGRATOR`). :func:`refuse_negative_extinction` refuses a
+homogeneous medium whose extinction is negative or not a number, which that
+integrator would otherwise render as NaN pixels.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
+import drjit as dr
 import mitsuba as mi
+import numpy as np
 
-__all__ = ["MEDIUM_INTEGRATOR", "lathe_media", "refuse_media"]
+__all__ = ["MEDIUM_INTEGRATOR", "lathe_media", "refuse_media", "refuse_negative_extinction"]
 
 #: The integrator of the package that renders lathes with media.
 MEDIUM_INTEGRATOR = "lathe_volpath"
@@ -53,3 +57,29 @@ def refuse_media(lathes: Iterable[mi.Shape], integrator: str) -> None:
         f"the lathe as if the medium were absent{more}. Use {MEDIUM_INTEGRATOR} for lathes with "
         "media (or remove the medium)."
     )
+
+
+def refuse_negative_extinction(scene: mi.Scene, integrator: str) -> None:
+    """Raise a ``ValueError`` naming the medium if a homogeneous medium of
+    ``scene`` (a shape's interior or exterior) has an
+    extinction ``sigma_t`` times ``scale`` that is negative or not a
+    number: ``integrator`` would render NaN pixels (a negative RGB
+    ``sigma_t`` Mitsuba refuses itself; a negative ``scale`` or float
+    ``sigma_t`` it accepts)."""
+    media = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
+    seen = set()
+    for medium in media:
+        if medium is None or not medium.is_homogeneous() or id(medium) in seen:
+            continue
+        seen.add(id(medium))
+        mei = dr.zeros(mi.MediumInteraction3f, 1)
+        if mi.is_spectral:
+            mei.wavelengths = mi.Spectrum(550.0)
+        _, _, sigma_t = medium.get_scattering_coefficients(mei, mi.Bool(True))
+        values = np.array(sigma_t, dtype=np.float64).ravel()
+        if np.all(values >= 0.0):
+            continue
+        shown = ", ".join(f"{v:g}" for v in values)
+        raise ValueError(
+            f"{_name(medium, medium.class_name())}: its extinction 'sigma_t' times 'scale' is ({shown}); "
+            f"both must be >= 0 (the integrator {integrator} would render NaN pixels)")

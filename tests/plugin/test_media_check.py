@@ -5,6 +5,7 @@ CLI."""
 from __future__ import annotations
 
 import mitsuba as mi
+import numpy as np
 import pytest
 from conftest import VARIANT
 
@@ -66,3 +67,36 @@ def test_cli_names_mesh_rendering_under_a_stock_integrator(tmp_path, capsys):
 def test_cli_is_quiet_under_lathe_path(tmp_path, capsys):
     out = run_render(tmp_path, capsys, "lathe_path")
     assert "note:" not in out and "reference mesh" not in out
+
+
+def test_cli_names_lathe_volpath_for_lathes_with_media(tmp_path, capsys):
+    """Under a stock integrator that renders media (volpath), the note
+    points to lathe_volpath, which renders lathes with media exactly
+    (lathe_path would refuse them)."""
+    path = tmp_path / "fog.xml"
+    path.write_text(SCENE.format(integrator="volpath", medium=FOG.format(side="interior")))
+    assert render.main(["--variant", VARIANT, str(path), "-o", str(tmp_path / "out"), "--no-png"]) == 0
+    notes = [line for line in capsys.readouterr().out.splitlines() if "note:" in line]
+    expected = 'lathe_volpath renders them exactly (e.g. <integrator type="lathe_volpath">)'
+    assert len(notes) == 1 and expected in notes[0], notes
+
+
+INK = '<medium type="homogeneous" name="interior" id="ink"><float name="{name}" value="{value}"/></medium>'
+
+
+@pytest.mark.parametrize("medium, shown", [(INK.format(name="scale", value="-2"), "-2"),
+                                           (INK.format(name="sigma_t", value="-0.5"), "-0.5")])
+def test_negative_extinction_is_an_error(medium, shown):
+    """A negative extinction (which Mitsuba accepts for a float sigma_t or a
+    negative scale) is refused by lathe_volpath naming the medium; before,
+    it rendered NaN pixels and exited 0."""
+    if mi.is_polarized:
+        pytest.skip("lathe_volpath refuses polarized variants")
+    scene = mi.load_string(SCENE.format(integrator="lathe_volpath", medium=medium))
+    with pytest.raises(Exception) as caught:
+        mi.render(scene, spp=1)
+    message = root_message(caught.value)
+    assert message.startswith("HomogeneousMedium 'ink': its extinction 'sigma_t' times 'scale' is (")
+    assert f"{shown}, {shown}, {shown}" in message and "lathe_volpath would render NaN pixels" in message
+    fine = mi.load_string(SCENE.format(integrator="lathe_volpath", medium=FOG.format(side="interior")))
+    assert np.isfinite(np.array(mi.render(fine, spp=1))).all()
