@@ -176,16 +176,14 @@ def check_or_convert(args: argparse.Namespace) -> int:
         return import_pov(args.from_pov, args.output, scene=args.scene, declares=args.declare,
                           strict_curves=args.strict_curves)
     points, sharp, labels = read_points(args.input)
-    declared = read_profile_options(args.input)
     kinds = profile_kinds()
+    # (an unknown '# kind:' is refused here, naming the file and line)
+    declared = read_profile_options(args.input, [k.name for k in kinds.values()])
     if args.kind is not None:
         record = kinds[args.kind]
     else:
         name = declared.get("kind", "polyline")
-        record = next((k for k in kinds.values() if k.name == name), None)
-        if record is None:
-            raise CliError(f"{args.input}: unknown profile kind '{name}' (expected one of: "
-                           f"{', '.join(k.name for k in kinds.values())})")
+        record = next(k for k in kinds.values() if k.name == name)
     kind = record.name
     open_sheet = args.open or declared.get("open", False)
     if record.kernel == "polyline":

@@ -85,7 +85,7 @@ def load_surface(props: mi.Properties) -> PolylineSurface | BSplineSurface:
     if not (0.0 <= crease <= 180.0):
         raise ValueError(f"{who}: parameter 'crease_angle' must be within [0, 180] degrees, got {crease:g}")
     points, sharp, labels, source = _read_points(props, who)
-    declared = read_profile_options(source) if "filename" in props else {}
+    declared = read_profile_options(source, KINDS) if "filename" in props else {}
     kind = _option(props, "kind", str, declared, "polyline", who, source)
     open_sheet = _option(props, "open", bool, declared, False, who, source)
     if kind not in KINDS:

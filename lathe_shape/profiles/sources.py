@@ -31,7 +31,7 @@ from __future__ import annotations
 import os
 import re
 from array import array
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import BinaryIO
 
 import numpy as np
@@ -154,11 +154,12 @@ def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
 _OPTION = re.compile(r"#\s*(kind|open)\s*:\s*(\S+)\s*$", re.IGNORECASE)
 
 
-def read_profile_options(path: str | os.PathLike) -> dict:
+def read_profile_options(path: str | os.PathLike, kinds: Iterable[str] | None = None) -> dict:
     """The ``# kind: NAME`` and ``# open: true|false`` declarations of a
     profile CSV file (``{}`` for none, or for an arc spec): ``{"kind": str,
     "open": bool}``. Raises :class:`ProfileError` naming the file and line
-    for an ``open`` value other than true/false."""
+    for an ``open`` value other than true/false, and for a kind not in
+    ``kinds`` (when given)."""
     path = os.fspath(path)
     if path.lower().endswith(SPEC_SUFFIXES):
         return {}
@@ -179,6 +180,9 @@ def read_profile_options(path: str | os.PathLike) -> dict:
                                            f"got {value!r}")
                     options[key] = value.lower() == "true"
                 else:
+                    if kinds is not None and value not in kinds:
+                        raise ProfileError(f"{path}, line {number}: unknown profile kind {value!r} "
+                                           f"(expected one of: {', '.join(kinds)})")
                     options[key] = value
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
