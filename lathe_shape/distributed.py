@@ -540,7 +540,8 @@ def sweep_specs(scene_file: str | os.PathLike, variations: Iterable[Mapping[str,
                 ) -> list[tuple[dict[str, str], RenderSpec]]:
     """(variation, spec) per variation: a dict of ``-D`` values (over the
     common ``defines``), or a profile file for the scene's first lathe
-    (the variation ``{"profile": path}``)."""
+    (the variation ``{"profile": path}``; :class:`ClusterError` before any
+    render if it does not exist)."""
     out = []
     for variation in variations:
         merged = {str(k): str(v) for k, v in (defines or {}).items()}
@@ -550,6 +551,8 @@ def sweep_specs(scene_file: str | os.PathLike, variations: Iterable[Mapping[str,
             profile = None
         else:
             profile = os.fspath(variation)
+            if not os.path.isfile(profile):  # (the workers read it under the same path)
+                raise ClusterError(f"profile file '{profile}' not found")
             values = {"profile": profile}
         out.append((values, variation_spec(scene_file, variant, merged, profile, spp, resolution, threads)))
     return out

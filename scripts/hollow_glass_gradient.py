@@ -78,6 +78,9 @@ def check(args: argparse.Namespace) -> int:
     for h in args.steps[1:]:
         fds[h] = finite_difference(scene, key, index, h, args.spp, args.seed).sum(axis=2)
     interior = first.interior
+    if interior.sum() < 2:
+        raise CliError(f"at {width}x{width} the glass has {interior.sum()} interior pixels (its image eroded "
+                       "by two pixels): use --resolution 32 or more")
     middle = width // 2
     left = np.zeros_like(interior)
     left[:, :middle] = True

@@ -198,6 +198,46 @@ def _report(prog: str, error: BaseException) -> int:
     return 130
 
 
+class _ClosedPipeSafe:
+    """A command's standard output that outlives its reader: once the
+    reader has gone (``lathe-profile --from-pov f.pov | head -1``), what the
+    command prints goes nowhere and the command finishes its work (its
+    files), instead of stopping at the next print with "Broken pipe"."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self._gone = False
+
+    def write(self, text: str) -> int:
+        if not self._gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._reader_gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._reader_gone()
+
+    def _reader_gone(self) -> None:
+        self._gone = True
+        # The interpreter flushes the stream at exit: point its descriptor
+        # at /dev/null, so that this flush cannot fail either
+        try:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())
+            os.close(null)
+        except (OSError, ValueError):
+            pass
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argparse.Namespace], int],
                 argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run ``body(args)``; every exception becomes a
@@ -208,6 +248,8 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     here, with that status, without waiting for the render or for the
     interpreter's shutdown."""
     interrupts.set_prog(prog)  # (the watcher's message, in a command process)
+    if argv is None and not isinstance(sys.stdout, _ClosedPipeSafe) and sys.stdout is not None:
+        sys.stdout = _ClosedPipeSafe(sys.stdout)
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:

@@ -107,7 +107,7 @@ def describe_bspline(path: str, spline) -> str:
     polyline)."""
     r_max, z_min, z_max = spline.bounds()
     if spline.kind == "bspline":
-        form = "closed periodic" if spline.closed_loop else "open, ends on the axis"
+        form = "closed periodic" if spline.closed_loop else "solid, ends on the axis"
         what = "cubic B-spline profile"
     else:
         form = ("open sheet" if spline.open_sheet else "closed loop" if spline.closed_loop
@@ -274,7 +274,8 @@ def import_pov(path: str, output: str | None, scene: str | None = None,
         if len(transforms) > MAX_PLACEMENTS:
             notes.append(f"placed {len(transforms)} times: the first {MAX_PLACEMENTS} are written")
         for note in block.notes + notes:
-            print(f"  note: {note}", file=sys.stderr)
+            # (on stderr: named, as it may be read apart from the lines above)
+            print(f"  note: {head}: {note}", file=sys.stderr)
         for name, csv, k, pts, open_sheet in shape:
             shapes.append(SceneShape(name, csv, k, open_sheet, [to_world(m) for m in placed], pts,
                                      block.material, comment=f"{block.object} '{block.name}' of "

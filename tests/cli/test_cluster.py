@@ -25,7 +25,7 @@ pytest.importorskip("distributed")
 psutil = pytest.importorskip("psutil")
 
 from lathe_shape.cli import sweep, turntable  # noqa: E402
-from lathe_shape.distributed import FAULTS_ENV, render_many  # noqa: E402
+from lathe_shape.distributed import FAULTS_ENV, ClusterError, render_many  # noqa: E402
 from lathe_shape.tools.images import read_exr  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -199,6 +199,10 @@ def test_sweep_writes_exrs_and_index(tmp_path, capsys):
                           variant=VARIANT, threads=1)
     assert local.variation == {"mesh_segments": "32", "max_depth": "4"}
     assert np.array_equal(pixels, local.image[..., :3])
+    missing = tmp_path / "no_such_profile.csv"
+    with pytest.raises(ClusterError, match=f"^profile file '{missing}' not found$"):
+        render_many(WINE, [{"mesh_segments": 32}, str(missing)], None, spp=2, resolution="16",
+                    variant=VARIANT)
 
     # In this process (no cluster), a profile file per render.
     out = tmp_path / "profiles"

@@ -113,7 +113,8 @@ def _hits(shape, n=3000, seed=0):
 def test_round_trip_gives_the_same_exact_hits(pov_file, tmp_path, capsys):
     out = tmp_path / "out"
     assert cli.main(["--from-pov", str(pov_file), "-o", str(out)]) == 0
-    assert "note: line 9: 'pigment' ignored" in capsys.readouterr().err
+    err = capsys.readouterr().err  # each object's notes name it: stderr may be read apart from stdout
+    assert f"  note: {pov_file}:3: lathe 'Vase': line 9: 'pigment' ignored" in err, err
     by_hand = {
         "Vase": ("bezier", "0 0, 1.5 0, 1.6 0.3, 1.6 1.2, 1.6 1.2, 1.6 2.2, 0.4 2.4, 0 2.4", False,
                  mi.ScalarTransform4f().translate([1, 3, 0]).scale(2)),
