@@ -339,7 +339,7 @@ _LOCATION = re.compile(r"(?:At|While loading) (?P<file>.+?) \((?P<position>line 
 _EXCEPTION_NAME = re.compile(r"^[A-Za-z_.]*(?:Error|Exception):\s*")
 
 
-def one_line_load_error(message: str, path: str) -> str:
+def _one_line_load_error(message: str, path: str) -> str:
     """Mitsuba's (multi-line) error on loading the scene ``path`` as one
     line: the file and position it names first, then what went wrong, with
     Mitsuba's source tags, exception class names and list bullets left out
@@ -419,7 +419,7 @@ def load_scene(
             raise KeyboardInterrupt from e
         message = _mitsuba_message(e, path)
         raise SceneError(_unused_defines_message(message, path, text)
-                         or one_line_load_error(message, path)) from None
+                         or _one_line_load_error(message, path)) from None
     if not isinstance(scene, mi.Scene):
         raise SceneError(f"{path}: the file does not describe a <scene>")
     if strict_error is not None:
