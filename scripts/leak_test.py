@@ -1,7 +1,9 @@
 """Watertightness of the polyline kernel: spawn-ray parity walk, exact vs mesh.
 
-Rays from outside the closed profiles of ``scenes/*.csv`` (a bottle, a
-sundae cup, a wine glass) are followed through every hit the way
+Rays from outside the solid profiles of ``scenes/*.csv`` (a bottle, a
+sundae cup, a wine glass, and the filled wine glass's union of glass and
+wine; the filled glass's open sheets, which have no inside, are left out)
+are followed through every hit the way
 integrators do (``si.spawn_ray`` past each hit: the restart is offset along
 the geometric normal by Mitsuba's ray epsilon), on the same rays for every
 query: random ones, rays aimed exactly at profile vertices and rays grazing
@@ -46,7 +48,7 @@ def main() -> None:
         print(f"total: {total[0]} rays, {total[1]} hitting, {total[2]} leaks, "
               f"leak rate {total[2] / max(total[1], 1):.2e} (per hitting ray)")
         return
-    files = sorted(SCENES.glob("*.csv"))
+    files = sorted(leaks.solid_profile_files(SCENES.glob("*.csv")))
     totals: dict[str, int] = {}
     for index, path in enumerate(files):
         counts = leaks.scene_parity_leaks(str(path), args.n_rays // len(files), seed=index,

@@ -12,8 +12,9 @@ through the paper's B-spline glass
 offset-free walk (``next_crossing_bspline``: every query from the ray's
 first origin, for the crossing after the last one) and the one-query count
 (``count_crossings_bspline``) on as many rays again, shared among the test
-curves and the points of every ``scenes/*.csv`` and ``scenes/paper/*.csv``
-taken as B-spline control points (rays aimed at random points, at the
+curves and the points of every solid profile of ``scenes/*.csv`` and
+``scenes/paper/*.csv`` (not the filled glass's open sheets) taken as
+B-spline control points (rays aimed at random points, at the
 leaves' joints and next to them).
 
     python scripts/leak_test_bspline.py [N_RAYS | --rays N] [--chunk 250000] [--mesh-segments 512]
@@ -48,7 +49,8 @@ def main() -> None:
     counts = leaks.scene_parity_leaks(str(GLASS), n_rays // 3, seed=7, mesh_segments=args.mesh_segments,
                                       chunk=args.chunk, kind="bspline")
     print(leaks.parity_summary("glass_bspline", counts))
-    files = sorted(str(path) for path in [*SCENES.glob("*.csv"), *SCENES.glob("paper/*.csv")])
+    files = sorted(str(path) for path in leaks.solid_profile_files([*SCENES.glob("*.csv"),
+                                                                    *SCENES.glob("paper/*.csv")]))
     for name, counts in bspline_leaks.walk_leak_table(files, n_rays, chunk=args.chunk):
         label = str(Path(name).relative_to(SCENES)) if name.startswith(str(SCENES)) else name
         print(bspline_leaks.walk_summary(label, counts), flush=True)

@@ -223,8 +223,16 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
     plugin_name = "lathe_prb"
 
     def __init__(self, props: mi.Properties) -> None:
+        who = type(self).plugin_name
+        # Checked before Mitsuba's RBIntegrator reads them (it takes any type)
+        max_depth = typed_property(props, "max_depth", int, 6, who)
+        if max_depth < -1:
+            raise ValueError(f"{who}: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}")
+        rr_depth = typed_property(props, "rr_depth", int, 5, who)
+        if rr_depth <= 0:
+            raise ValueError(f"{who}: parameter 'rr_depth' must be > 0, got {rr_depth}")
+        typed_property(props, "hide_emitters", bool, False, who)
         super().__init__(props)
-        who = self.plugin_name
         self.normal_check = normal_check_parameter(props, who)
         self.silhouette = typed_property(props, "silhouette", bool, True, who)
         self.silhouette_spp = typed_property(props, "silhouette_spp", int, 4, who)

@@ -121,13 +121,28 @@ def make_profile(
     profile is accepted or refused alike.
     """
     try:
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        raw = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise ProfileError(f"{source}: profile points must be (r, z) pairs of numbers ({e})") from None
+    # (N, 2) rows, or the flat r0, z0, r1, z1, ... of the differentiable 'points'
+    if not ((raw.ndim == 2 and raw.shape[1] == 2) or (raw.ndim == 1 and raw.size % 2 == 0)):
+        raise ProfileError(f"{source}: profile points must be (r, z) pairs: an (N, 2) array or a flat "
+                           f"r0, z0, r1, z1, ... list, got an array of shape {raw.shape}")
+    pts = raw.reshape(-1, 2)
     check_point_count(len(pts), source)
-    flags = np.zeros(len(pts), dtype=bool) if sharp is None else np.asarray(sharp, dtype=bool).copy()
+    flags = np.zeros(len(pts), dtype=bool)
+    if sharp is not None:
+        given = np.asarray(sharp)
+        if given.shape != (len(pts),):
+            raise ProfileError(f"{source}: 'sharp' must hold one flag per point ({len(pts)}), "
+                               f"got shape {given.shape}")
+        flags = given.astype(bool)
     if labels is None:
         labels = PointLabels.counting(source, len(pts))
+    elif len(labels) != len(pts):
+        raise ProfileError(f"{source}: 'labels' must name every point ({len(pts)}), got {len(labels)}")
+    if not isinstance(crease_angle, (int, float, np.floating, np.integer)) or isinstance(crease_angle, bool):
+        raise ProfileError(f"{source}: crease_angle must be a number of degrees, got {crease_angle!r}")
     if not math.isfinite(crease_angle) or not 0.0 <= crease_angle <= 180.0:
         raise ProfileError(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"

@@ -42,16 +42,21 @@ def forward_gradient(scene: mi.Scene, key: str, index: int, spp: int, seed: int 
     must be differentiable, e.g. ``lathe_prb``)."""
     params = mi.traverse(scene)
     value = params[key]
+    if not 0 <= index < dr.width(value):
+        raise IndexError(f"forward_gradient: index {index} is not a coordinate of '{key}' "
+                         f"(0..{dr.width(value) - 1})")
     dr.enable_grad(value)
-    params.update()
-    tangent = np.zeros(dr.width(value), dtype=np.float32)
-    tangent[index] = 1.0
-    dr.set_grad(value, mi.Float(tangent))
-    # The integrator directly (mi.render refuses equal primal and gradient
-    # seeds): the same samples as the primal renders of finite_difference
-    grad = scene.integrator().render_forward(scene, params, seed=seed, spp=spp)
-    dr.disable_grad(value)
-    return np.array(grad)
+    try:
+        params.update()
+        tangent = np.zeros(dr.width(value), dtype=np.float32)
+        tangent[index] = 1.0
+        dr.set_grad(value, mi.Float(tangent))
+        # The integrator directly (mi.render refuses equal primal and gradient
+        # seeds): the same samples as the primal renders of finite_difference
+        grad = scene.integrator().render_forward(scene, params, seed=seed, spp=spp)
+        return np.array(grad)
+    finally:
+        dr.disable_grad(value)
 
 
 def set_points(scene: mi.Scene, key: str, values: np.ndarray) -> None:
@@ -66,13 +71,19 @@ def finite_difference(scene: mi.Scene, key: str, index: int, h: float, spp: int,
     """Central difference ``(I(x + h e_i) - I(x - h e_i)) / 2h`` of the
     primal render with one seed (correlated samples); restores the points."""
     base = np.array(mi.traverse(scene)[key], dtype=np.float64)
+    if not 0 <= index < len(base):
+        raise IndexError(f"finite_difference: index {index} is not a coordinate of '{key}' "
+                         f"(0..{len(base) - 1})")
     images = []
-    for sign in (1.0, -1.0):
-        moved = base.copy()
-        moved[index] += sign * h
-        set_points(scene, key, moved)
-        images.append(np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float64))
-    set_points(scene, key, base)
+    try:
+        for sign in (1.0, -1.0):
+            moved = base.copy()
+            moved[index] += sign * h
+            set_points(scene, key, moved)
+            images.append(np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float64))
+    finally:
+        # (also when a step makes an invalid profile, which set_points refuses)
+        set_points(scene, key, base)
     return (images[0] - images[1]) / (2.0 * h)
 
 

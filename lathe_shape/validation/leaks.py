@@ -39,6 +39,7 @@ from ..kernels.polyline import (
     next_crossing_polyline,
     polyline_geometry,
 )
+from ..profiles import read_profile_options
 from . import reference as ref
 
 __all__ = [
@@ -52,6 +53,7 @@ __all__ = [
     "scene_parity_leaks",
     "random_profile_leaks",
     "parity_summary",
+    "solid_profile_files",
 ]
 
 
@@ -442,3 +444,10 @@ def parity_summary(name: str, counts: dict[str, int],
         parts.append(f"{kind}: hitting {hits:9d} odd {odd:5d} ({odd / max(hits, 1):.1e})"
                      + (f" stuck {counts[f'stuck_{kind}']}" if counts[f"stuck_{kind}"] else ""))
     return "  ".join(parts)
+
+
+def solid_profile_files(paths) -> list:
+    """The profile files among ``paths`` that bound solids: those that do
+    not declare ``# open: true`` (an open sheet, such as the filled wine
+    glass's, has no inside, so a parity count means nothing for it)."""
+    return [path for path in paths if not read_profile_options(str(path)).get("open", False)]

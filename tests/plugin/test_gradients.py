@@ -295,7 +295,12 @@ def test_crease_seen_from_the_front_moves_with_its_vertex():
     ({"grazing_cosine": 1.5}, "lathe_prb: parameter 'grazing_cosine' must be in (0, 1), got 1.5"),
     ({"grazing_cosine": 0.0}, "lathe_prb: parameter 'grazing_cosine' must be in (0, 1), got 0"),
     ({"silhouette_spp": 0}, "lathe_prb: parameter 'silhouette_spp' must be >= 1, got 0"),
-    ({"glass_outline_lines": 0}, "lathe_prb: parameter 'glass_outline_lines' must be >= 1, got 0")])
+    ({"glass_outline_lines": 0}, "lathe_prb: parameter 'glass_outline_lines' must be >= 1, got 0"),
+    # Mitsuba's RBIntegrator took any type here (a float max_depth failed only in the render)
+    ({"max_depth": 3.0}, "lathe_prb: parameter 'max_depth' must be given as <integer>, got 3.0"),
+    ({"max_depth": -3}, "lathe_prb: parameter 'max_depth' must be -1 (infinite) or >= 0, got -3"),
+    ({"rr_depth": 2.5}, "lathe_prb: parameter 'rr_depth' must be given as <integer>, got 2.5"),
+    ({"rr_depth": 0}, "lathe_prb: parameter 'rr_depth' must be > 0, got 0")])
 def test_prb_parameter_errors(props, message):
     with pytest.raises(RuntimeError, match=re.escape(message)):
         mi.load_dict({"type": "lathe_prb", **props})

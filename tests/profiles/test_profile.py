@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -161,3 +162,22 @@ def test_crease_angle_and_sharp_flag():
     k = int(np.flatnonzero((flagged.points[:, 0] == 1) & (flagged.points[:, 1] == 2))[0])
     seg_in = int(np.flatnonzero(flagged.segments[:, 1] == k)[0])
     assert not np.allclose(flagged.normal_end[seg_in], flagged.normal_start[seg_in + 1])
+
+
+CUP = [[0, 0], [1, 0], [1, 2], [0.9, 2], [0.9, 0.1], [0, 0.1]]
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    # (4, 3) was read as 6 points of other geometry; (2, N) named points never given
+    ({"points": [[0, 0, 1], [0, 1, 1], [0.5, 1.5, 0.2], [2, 0, 2]]}, "got an array of shape (4, 3)"),
+    ({"points": np.array(CUP).T}, "got an array of shape (2, 6)"),
+    ({"points": CUP, "sharp": [1, 0]}, "'sharp' must hold one flag per point (6), got shape (2,)"),
+    ({"points": CUP, "sharp": [0] * 8}, "'sharp' must hold one flag per point (6), got shape (8,)"),
+    ({"points": CUP, "labels": ["a"]}, "'labels' must name every point (6), got 1"),
+    ({"points": CUP, "crease_angle": "30"}, "crease_angle must be a number of degrees, got '30'"),
+])
+def test_python_arguments_are_checked(kwargs, message):
+    with pytest.raises(ProfileError, match=f"^cup: .*{re.escape(message)}"):
+        make_profile(source="cup", **kwargs)
+    # The flat r0, z0, r1, z1, ... form (the differentiable parameter's) stays accepted
+    assert len(make_profile(np.ravel(CUP)).points) == 6
