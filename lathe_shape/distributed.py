@@ -618,7 +618,17 @@ def render_many(scene_file: str | os.PathLike,
     ``-D`` ``defines``. Returns the :class:`Render` of each variation, in
     the order given; a render that fails twice raises
     :class:`ClusterError`. The scene and profile files must be readable by
-    the workers under the same (absolute) paths."""
+    the workers under the same (absolute) paths. A ``ValueError`` for
+    arguments of the wrong kind, before anything renders."""
+    if isinstance(variations, (Mapping, str, bytes, os.PathLike)):
+        raise ValueError("render_many: 'variations' must be a list of variations (dicts of -D values or "
+                         f"profile files), got {type(variations).__name__}: wrap a single one in a list")
+    if spp is not None and (isinstance(spp, bool) or not isinstance(spp, int) or spp < 1):
+        raise ValueError(f"render_many: 'spp' must be a whole number >= 1 or None, got {spp!r}")
+    if isinstance(resolution, int) and not isinstance(resolution, bool):
+        resolution = str(resolution)  # (a square film, as "N")
+    if resolution is not None and not isinstance(resolution, str):
+        raise ValueError(f"render_many: 'resolution' must be 'WxH', 'N' or None, got {resolution!r}")
     specs = sweep_specs(scene_file, variations, variant, spp, resolution, threads, defines)
     renders = sorted(iter_renders(specs, client, seed), key=lambda r: r.index)
     return renders

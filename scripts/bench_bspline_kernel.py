@@ -173,16 +173,17 @@ def kernel_table(K, bdata, pdata, baseline=None) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rays", type=int, default=1_000_000)
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--rays", type=int, default=1_000_000, help="rays per set (default: 1000000)")
+    parser.add_argument("--repeat", type=int, default=5, help="timed runs per case (default: 5)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
     parser.add_argument("--module", default=None,
                         help="alternative kernel: a copy of lathe_shape/kernels, or its bspline.py")
     parser.add_argument("--baseline", default=None,
                         help="a second kernel (as --module), timed interleaved with the first")
     parser.add_argument("--threads", type=int, default=0,
                         help="Dr.Jit worker threads (0: default); with 1, times are CPU times")
-    parser.add_argument("--sets", default="camera,surface,inside")
+    parser.add_argument("--sets", default="camera,surface,inside",
+                        help="ray sets, comma-separated (default: camera,surface,inside)")
     args = parser.parse_args()
     mi.set_variant(args.variant)
     if args.threads:

@@ -46,13 +46,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", default=str(ROOT / "scenes" / "wine_glass.xml"))
-    parser.add_argument("--resolution", default="256")
-    parser.add_argument("--spp", type=int, default=16)
+    parser.add_argument("--scene", default=str(ROOT / "scenes" / "wine_glass.xml"),
+                        help="scene (default: the repository's scenes/wine_glass.xml)")
+    parser.add_argument("--resolution", default="256", help="frame size, WxH or N (default: 256)")
+    parser.add_argument("--spp", type=int, default=16, help="samples per pixel (default: 16)")
     parser.add_argument("--frames", type=int, default=16, help="frames per timed turn (default: 16)")
     parser.add_argument("--repeats", type=int, default=3, help="interleaved rounds (default: 3)")
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
-    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4],
+                        help="local cluster sizes to measure (default: 1 2 4)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="KEY=VALUE")
     return parser.parse_args(argv)
 

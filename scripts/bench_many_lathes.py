@@ -102,8 +102,10 @@ def main() -> None:
     from lathe_shape.cli.common import add_render_options, parse_resolution
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1000])
-    parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"])
+    parser.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1000],
+                        help="lathe counts to measure (default: 1 64 256 1000)")
+    parser.add_argument("--references", nargs="+", default=["mesh", "proxy"], choices=["mesh", "proxy"],
+                        help="the lathes' stand-ins in Mitsuba's scene (default: mesh proxy)")
     add_render_options(parser, spp_default=4, resolution_default="128x128", defines=False)
     parser.add_argument("--integrators", nargs="+", default=["lathe_path"], choices=["lathe_path", "path"],
                         help="integrators to time (default: lathe_path; path: Mitsuba's own, on the proxies)")

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lathe_shape.validation.bench import square_side
+
 
 def vase_points(n: int, seed: int = 0) -> np.ndarray:
     """A closed vase profile of ``n`` points: from the axis at the bottom out,
@@ -67,12 +69,15 @@ def segment_boxes(profile) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--points", type=int, nargs="+", default=[100_000, 1_000_000])
-    parser.add_argument("--reference", default="proxy", choices=("proxy", "mesh"))
-    parser.add_argument("--resolution", type=int, default=64)
-    parser.add_argument("--old", action="store_true", help="also time the recursive builder")
-    parser.add_argument("--no-render", action="store_true")
-    parser.add_argument("--variant", default="llvm_ad_rgb")
+    parser.add_argument("--points", type=int, nargs="+", default=[100_000, 1_000_000],
+                        help="profile point counts (default: 100000 1000000)")
+    parser.add_argument("--reference", default="proxy", choices=("proxy", "mesh"),
+                        help="the lathe's stand-in in Mitsuba's scene (default: proxy)")
+    parser.add_argument("--resolution", type=square_side, default=64, metavar="NxN",
+                        help="render size, NxN or N (default: 64x64)")
+    parser.add_argument("--old", action="store_true", help="also time the recursive builder (default: off)")
+    parser.add_argument("--no-render", action="store_true", help="time the tree builds only (default: off)")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
     args = parser.parse_args()
 
     import mitsuba as mi

@@ -6,9 +6,10 @@ bottle and the filled wine glass.
 
 Times are medians of --repeat interleaved renders (A B A B ...) after a
 warm-up render of each (which pays the JIT compilation), with their min-max
-spread; the ratio is lathe_volpath's median over volpath's.
+spread; the ratio is lathe_volpath's median over volpath's. (docs/media.md's
+measurement used --max-depth 16.)
 
-    python scripts/bench_volpath.py [--resolution 256x256] [--spp 16] [--max-depth 16] [--repeat 5]
+    python scripts/bench_volpath.py [--resolution 256x256] [--spp 16] [--max-depth 8] [--repeat 5]
                                     [--seed 0] [--variant llvm_ad_rgb] [-D KEY=VALUE ...] [--all]
 """
 

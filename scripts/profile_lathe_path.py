@@ -1,7 +1,7 @@
 """Where the time of an exact render goes: differential timings of
 `lathe_path` and stock `path`, and ray-query throughput on the same rays.
 
-Renders (median and min-max of --repeat interleaved renders):
+Renders (medians of --repeat interleaved renders):
   A  `path` on the scene without its lathes
   B  `lathe_path` on the scene without its lathes   (B - A: the Python integrator)
   C  `path` on the scene with the reference mesh    (C - A: the mesh)

@@ -36,7 +36,9 @@ DEFAULT_MODE = "orbit"
 def _cos_sin(angle_deg: float) -> tuple[float, float]:
     """cos and sin of an angle in degrees, exact at multiples of 90 degrees
     (so e.g. the frames of a 4-frame turn carry no round-off: cos(pi/2) is
-    6e-17, not 0)."""
+    6e-17, not 0). A ``ValueError`` for an angle that is not finite."""
+    if not math.isfinite(angle_deg):
+        raise ValueError(f"a turntable angle must be a finite number of degrees, got {angle_deg!r}")
     quarter = angle_deg / 90.0
     if quarter == round(quarter):
         return [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][int(round(quarter)) % 4]

@@ -25,6 +25,7 @@ __all__ = [
     "interleaved_render_times",
     "load_with_profile",
     "median_spread",
+    "square_side",
 ]
 
 
@@ -205,3 +206,17 @@ def cold_first_render_parts(scene_file: str | Path, integrator: str, variant: st
     if result.returncode != 0:
         raise RuntimeError(f"cold render of {scene_file} failed: {result.stderr.strip()[-500:]}")
     return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def square_side(text: str) -> int:
+    """A square benchmark's ``--resolution``: ``N`` or ``NxN`` (an
+    ``argparse`` type: a bad value is a usage error naming it)."""
+    from ..cli.common import CliError, parse_resolution
+
+    try:
+        width, height = parse_resolution(text)
+    except CliError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if width != height:
+        raise argparse.ArgumentTypeError(f"the frames are square: give N or NxN, got {text!r}")
+    return width

@@ -36,6 +36,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..plugin.params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS
+from .bench import square_side
 
 __all__ = ["SCENES", "bench_parser", "caustic_image", "chain_solve_rate", "glass_mask", "regions",
            "run_bench"]
@@ -261,22 +262,33 @@ def noise_floor(results: dict, region: str, reference_spp: int, spp: int) -> flo
 
 
 def bench_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="bench_caustics.py", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenes", nargs="+", default=["bottle", "wine_glass"], choices=sorted(SCENES))
-    parser.add_argument("--resolution", type=int, default=256)
-    parser.add_argument("--reference-spp", type=int, default=4096)
-    parser.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256])
+    parser = argparse.ArgumentParser(
+        prog="bench_caustics.py",
+        description="Caustics of lathe_path (and of lathe_volpath in the scenes with media): plain path "
+                    "tracing against path tracing with light-traced caustic paths, error on the caustic "
+                    "region, the glass pixels and the whole image against a high-spp plain reference, "
+                    "and the time to reach plain's 256 spp error.")
+    parser.add_argument("--scenes", nargs="+", default=["bottle", "wine_glass"], choices=sorted(SCENES),
+                        help="scenes to measure (default: bottle wine_glass)")
+    parser.add_argument("--resolution", type=square_side, default=256, metavar="NxN",
+                        help="image size, NxN or N (default: 256x256)")
+    parser.add_argument("--reference-spp", type=int, default=4096,
+                        help="spp of the plain reference (default: 4096)")
+    parser.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256],
+                        help="spp of the timed renders (default: 4 16 64 256)")
     parser.add_argument("--target-spp", type=int, default=256,
-                        help="plain lathe_path's spp whose caustic-region error is the target")
-    parser.add_argument("--repeats", type=int, default=3)
+                        help="plain lathe_path's spp whose caustic-region error is the target (default: 256)")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="interleaved renders per case, their median timed (default: 3)")
     parser.add_argument("--caustic-paths", type=float, default=CAUSTIC_PATHS,
                         help=f"lathe_path's caustic_paths (default: {CAUSTIC_PATHS})")
     parser.add_argument("--caustic-camera-chains", type=float, default=CAUSTIC_CAMERA_CHAINS,
                         help=f"lathe_path's caustic_camera_chains (default: {CAUSTIC_CAMERA_CHAINS})")
     parser.add_argument("--unbiased", type=int, default=0, metavar="SPP",
                         help="also render with caustics at SPP and compare its means with the reference")
-    parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "lathe_caustics_bench"))
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (default: llvm_ad_rgb)")
+    cache = os.path.join(tempfile.gettempdir(), "lathe_caustics_bench")
+    parser.add_argument("--cache", default=cache, help=f"folder of the cached references (default: {cache})")
     parser.add_argument("--root", default=os.getcwd(), help="the repository (for scenes/)")
     parser.add_argument("--save", default=None, metavar="FOLDER",
                         help="write the 16 spp images (plain, caustics) and the reference as EXR here")

@@ -22,6 +22,7 @@ import numpy as np
 from ..tools.denoise import Denoiser
 from ..tools.images import image_errors, relative_error
 from ..tools.turntable import Turntable
+from .bench import square_side
 
 __all__ = [
     "bench_parser", "compared_frames", "denoise_errors", "flicker", "frame_times", "lathe_mask", "run_bench",
@@ -270,30 +271,21 @@ def _scene_file(path: str) -> str:
     return path
 
 
-def _square_side(text: str) -> int:
-    """``--resolution``: ``N`` or ``NxN`` (the bench renders square frames)."""
-    from ..cli.common import CliError, parse_resolution
-
-    try:
-        width, height = parse_resolution(text)
-    except CliError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-    if width != height:
-        raise argparse.ArgumentTypeError(f"the frames are square: give N or NxN, got {text!r}")
-    return width
-
-
 def bench_parser() -> argparse.ArgumentParser:
     """Options of ``scripts/bench_turntable.py``."""
     from ..cli.common import DEFAULT_VARIANT
 
-    parser = argparse.ArgumentParser(prog="bench_turntable.py", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="bench_turntable.py",
+        description="Turntables measured: the per-frame cost of lathe-turntable against a bare mi.render "
+                    "loop over the same poses, the error of noisy and denoised frames on the lathe's pixels "
+                    "against a high-spp reference, and the frame-to-frame flicker of the seeding policies.")
     parser.add_argument("--scene", type=_scene_file, default=DEFAULT_SCENE,
                         help="Mitsuba XML scene with a lathe "
                              "(default: the repository's scenes/wine_glass.xml)")
     parser.add_argument("--variant", default=DEFAULT_VARIANT,
                         help=f"Mitsuba variant (default: {DEFAULT_VARIANT})")
-    parser.add_argument("--resolution", type=_square_side, default=128, metavar="NxN",
+    parser.add_argument("--resolution", type=square_side, default=128, metavar="NxN",
                         help="frame size, NxN or N (default: 128x128)")
     parser.add_argument("--frames", type=int, default=8, help="frames of the timing run (default: 8)")
     parser.add_argument("--rounds", type=int, default=3,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -199,6 +200,13 @@ def test_sweep_writes_exrs_and_index(tmp_path, capsys):
                           variant=VARIANT, threads=1)
     assert local.variation == {"mesh_segments": "32", "max_depth": "4"}
     assert np.array_equal(pixels, local.image[..., :3])
+    for kwargs, message in (({"variations": {"mesh_segments": 16}}, "'variations' must be a list"),
+                            ({"spp": 2.5}, "'spp' must be a whole number >= 1 or None, got 2.5"),
+                            ({"spp": -1}, "'spp' must be a whole number >= 1 or None, got -1"),
+                            ({"resolution": 16.0}, "'resolution' must be 'WxH', 'N' or None, got 16.0")):
+        arguments = {"variations": [{"mesh_segments": 16}], "spp": 2, "resolution": "16", **kwargs}
+        with pytest.raises(ValueError, match=f"^render_many: {re.escape(message)}"):
+            render_many(WINE, arguments.pop("variations"), None, variant=VARIANT, **arguments)
     missing = tmp_path / "no_such_profile.csv"
     with pytest.raises(ClusterError, match=f"^profile file '{missing}' not found$"):
         render_many(WINE, [{"mesh_segments": 32}, str(missing)], None, spp=2, resolution="16",

@@ -128,6 +128,11 @@ def test_transforms():
     np.testing.assert_allclose(axis, tilt[:3, 2])
     np.testing.assert_array_equal(poses.rotate_z(360.0), np.eye(4))
     np.testing.assert_array_equal(poses.rotation_about_axis(origin, axis, 0.0), np.eye(4))
+    for angle in (float("nan"), float("inf")):  # (a numpy conversion error before)
+        with pytest.raises(ValueError, match="a turntable angle must be a finite number of degrees"):
+            poses.rotate_z(angle)
+        with pytest.raises(ValueError, match="a turntable angle must be a finite number of degrees"):
+            poses.spin_matrix(lathe, angle)
 
     spun = poses.spin_matrix(lathe, 70.0)
     np.testing.assert_allclose(spun[:3, 3], lathe[:3, 3])  # spins in place
