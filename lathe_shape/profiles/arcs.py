@@ -421,7 +421,7 @@ def build_from_spec(spec: dict, source: str = "arc profile spec") -> tuple[np.nd
     if "start" not in spec:
         raise ProfileError(f"{source}: missing key 'start' (the first point [r, z])")
     start = _point(spec["start"], f"{source}: start")
-    heading = _optional(spec, "heading_deg", f"{source}: heading_deg", "number") or 0.0
+    heading = _number(spec["heading_deg"], f"{source}: heading_deg") if "heading_deg" in spec else 0.0
     step = spec.get("max_step_deg", DEFAULT_STEP_DEG)
     step = _number(step, f"{source}: max_step_deg", positive=True)
     b = ArcProfileBuilder(start, heading, step, source)

@@ -22,6 +22,7 @@ __all__ = [
     "BYTES_PER_POINT",
     "MAX_COORDINATE",
     "MAX_PROFILE_POINTS",
+    "MIN_PROFILE_SIZE",
     "check_point_count",
 ]
 
@@ -30,6 +31,10 @@ MAX_PROFILE_POINTS = 10_000_000
 
 #: Largest coordinate magnitude: squares stay finite in float32.
 MAX_COORDINATE = 1e18
+
+#: Smallest size (largest coordinate magnitude) of a profile: products of
+#: coordinates stay normal floats in float64.
+MIN_PROFILE_SIZE = 1e-100
 
 #: Samples per B-spline curve segment of the flattened curve that the
 #: self-intersection and regularity checks examine.

@@ -37,7 +37,7 @@ import numpy as np
 
 from .crossings import first_crossing, touch_tolerance
 from .errors import ProfileError
-from .limits import MAX_COORDINATE, check_point_count
+from .limits import MAX_COORDINATE, MIN_PROFILE_SIZE, check_point_count
 from .sources import parse_profile_string, read_profile_csv
 from .text import PointLabels
 
@@ -148,6 +148,11 @@ def make_profile(
             f"{source}: crease_angle must be within [0, 180] degrees, got {crease_angle}"
         )
     _check_coordinates(pts, labels)
+    size = float(np.abs(pts).max()) if pts.size else 0.0
+    if 0.0 < size < MIN_PROFILE_SIZE:
+        raise ProfileError(f"{source}: the profile is too small to check: its largest coordinate is "
+                           f"{size:g}, below {MIN_PROFILE_SIZE:g} (give it in larger units, and scale it "
+                           "down in to_world)")
     if open_sheet:
         return _open_profile(pts, flags, labels, source, crease_angle)
     pts, flags, closed_loop = _closed_chain(pts, flags, source)
@@ -264,9 +269,9 @@ def _check_segment_lengths(pts: np.ndarray, labels: Sequence[str], closed_loop: 
     """No two consecutive points equal (zero-length segment)."""
     n = len(pts)
     nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
-    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
-    if (seg_len == 0.0).any():
-        k = int(np.argmax(seg_len == 0.0))
+    repeats = (pts[nxt] == pts[: len(nxt)]).all(axis=1)  # (exact: a norm underflows at 1e-300)
+    if repeats.any():
+        k = int(np.argmax(repeats))
         k2 = (k + 1) % n
         raise ProfileError(
             f"{labels[k2]}: repeats the previous point ({_fmt(pts[k])}): zero-length segment"
@@ -281,7 +286,8 @@ def _check_short_segments(pts: np.ndarray, labels: Sequence[str], closed_loop: b
     its end points in full precision (issue 24, item 14)."""
     n = len(pts)
     nxt = np.arange(1, n + 1) % n if closed_loop else np.arange(1, n)
-    seg_len = np.linalg.norm(pts[nxt] - pts[: len(nxt)], axis=1)
+    step = pts[nxt] - pts[: len(nxt)]
+    seg_len = np.hypot(step[:, 0], step[:, 1])  # (no underflow of the squares at 1e-300)
     short = seg_len <= tol
     if short.any():
         k = int(np.argmax(short))

@@ -143,6 +143,7 @@ def test_json_and_toml_files(tmp_path):
     ({"wall": [{"arc": {"radius": 0.1, "sweep": 30}}]}, "thickness"),
     ({"start": "origin"}, "start"),
     ({"base": [{"line": {"to": [3.0, 0.0], "segments": 0}}]}, "segments"),
+    ({"heading_deg": "north"}, ": heading_deg: expected a finite number"),  # (was "heading_deg.heading_deg")
 ])
 def test_spec_errors(tmp_path, patch, key):
     path = tmp_path / "bad.json"

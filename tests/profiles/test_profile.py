@@ -175,6 +175,8 @@ CUP = [[0, 0], [1, 0], [1, 2], [0.9, 2], [0.9, 0.1], [0, 0.1]]
     ({"points": CUP, "sharp": [0] * 8}, "'sharp' must hold one flag per point (6), got shape (8,)"),
     ({"points": CUP, "labels": ["a"]}, "'labels' must name every point (6), got 1"),
     ({"points": CUP, "crease_angle": "30"}, "crease_angle must be a number of degrees, got '30'"),
+    # (products of coordinates underflowed: "repeats the previous point", "encloses no area")
+    ({"points": np.array(CUP) * 1e-300}, "too small to check: its largest coordinate is 2e-300"),
 ])
 def test_python_arguments_are_checked(kwargs, message):
     with pytest.raises(ProfileError, match=f"^cup: .*{re.escape(message)}"):
