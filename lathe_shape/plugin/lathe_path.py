@@ -159,9 +159,11 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
     plugin_name = "lathe_path"
 
     def __init__(self, props: mi.Properties) -> None:
+        who = type(self).plugin_name
+        # Read before Mitsuba's base class reads hide_emitters (whose type error names no plugin)
+        depths = path_parameters(props, who)
         super().__init__(props)
-        who = self.plugin_name
-        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, who)
+        self.max_depth, self.rr_depth, self.hide_emitters = depths
         self.normal_check = normal_check_parameter(props, who)
         #: The guide images rendered as AOVs (see ``aovs``).
         self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who))

@@ -146,8 +146,10 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
     refuses_media = False
 
     def __init__(self, props: mi.Properties) -> None:
+        # Read before Mitsuba's base class reads hide_emitters (whose type error names no plugin)
+        depths = path_parameters(props, type(self).plugin_name)
         super().__init__(props)
-        self.max_depth, self.rr_depth, self.hide_emitters = path_parameters(props, self.plugin_name)
+        self.max_depth, self.rr_depth, self.hide_emitters = depths
         #: The caustic parameters (caustic_render.py)
         self.caustic_settings = CausticSettings.read(props, self.plugin_name)
         #: While a render with caustics runs: (tracer, particles per camera

@@ -192,6 +192,8 @@ class LatheWhittedIntegrator(ExactLatheSamplingIntegrator):
     plugin_name = "lathe_whitted"
 
     def __init__(self, props: mi.Properties) -> None:
+        # Read before Mitsuba's base class reads it (whose type error names no plugin)
+        typed_property(props, "hide_emitters", bool, False, type(self).plugin_name)
         super().__init__(props)
         who = self.plugin_name
         self.max_depth = typed_property(props, "max_depth", int, 10, who)

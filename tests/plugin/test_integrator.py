@@ -206,6 +206,18 @@ def test_parameter_errors():
     assert isinstance(integrator, LathePathIntegrator) and integrator.normal_check == "fallback"
 
 
+@pytest.mark.parametrize("plugin", ["lathe_path", "lathe_volpath", "lathe_whitted", "lathe_prb"])
+def test_hide_emitters_type_error_names_the_plugin(plugin):
+    """Read before Mitsuba's base class, whose own type error ("[properties.cpp:572] The
+    property ...") named no plugin."""
+    if mi.is_polarized and plugin != "lathe_prb":
+        pytest.skip("polarized variants run lathe_prb only")
+    with pytest.raises(RuntimeError, match=re.escape(
+            f"{plugin}: parameter 'hide_emitters' must be given as <boolean>, got 'true'")):
+        mi.load_dict({"type": plugin, "hide_emitters": "true"})
+    assert mi.load_dict({"type": plugin, "hide_emitters": True}).hide_emitters
+
+
 def test_several_lathes_with_other_geometry():
     # Two lathes (glass and diffuse, one of them moved and scaled) beside a
     # sphere on a floor: the exact render matches the fine-mesh render.
