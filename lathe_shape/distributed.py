@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import numbers
 import os
 import re
 import shutil
@@ -623,9 +624,9 @@ def render_many(scene_file: str | os.PathLike,
     if isinstance(variations, (Mapping, str, bytes, os.PathLike)):
         raise ValueError("render_many: 'variations' must be a list of variations (dicts of -D values or "
                          f"profile files), got {type(variations).__name__}: wrap a single one in a list")
-    if spp is not None and (isinstance(spp, bool) or not isinstance(spp, int) or spp < 1):
+    if spp is not None and (isinstance(spp, bool) or not isinstance(spp, numbers.Integral) or spp < 1):
         raise ValueError(f"render_many: 'spp' must be a whole number >= 1 or None, got {spp!r}")
-    if isinstance(resolution, int) and not isinstance(resolution, bool):
+    if isinstance(resolution, numbers.Integral) and not isinstance(resolution, bool):
         resolution = str(resolution)  # (a square film, as "N")
     if resolution is not None and not isinstance(resolution, str):
         raise ValueError(f"render_many: 'resolution' must be 'WxH', 'N' or None, got {resolution!r}")

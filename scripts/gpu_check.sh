@@ -21,8 +21,9 @@ elapsed() { echo $(( $(date +%s) - START )); }
 say() { echo "[$(elapsed) s] $*"; }
 
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$OUTPUT/gpu.txt"
-python3 -c "import mitsuba as mi, drjit as dr; mi.set_variant('cuda_ad_rgb'); print('mitsuba', mi.__version__, 'drjit', dr.__version__)" \
-    2>&1 | tee -a "$OUTPUT/gpu.txt" || exit 1
+versions=$(python3 -c "import mitsuba as mi, drjit as dr; mi.set_variant('cuda_ad_rgb'); \
+print('mitsuba', mi.__version__, 'drjit', dr.__version__)" 2>&1) || { echo "$versions"; exit 1; }
+echo "$versions" | tee -a "$OUTPUT/gpu.txt"
 
 say "backend-sensitive tests"
 timeout 170 python3 -m pytest -v -n 15 -p no:cacheprovider -rfE \

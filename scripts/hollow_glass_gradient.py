@@ -53,7 +53,7 @@ def check(args: argparse.Namespace) -> int:
     width, height = parse_resolution(args.resolution)
     if width != height:
         raise CliError(f"--resolution must be square, got {args.resolution!r}")
-    check_at_least("--resolution", width, 16)
+    check_at_least("--resolution", width, 32)
     if not all(np.isfinite(h) and h > 0.0 for h in args.steps):
         raise CliError(f"--steps must be positive, got {' '.join(f'{h:g}' for h in args.steps)}")
     select_variant(args.variant)

@@ -138,6 +138,8 @@ def test_unregistered_kind_is_refused(tmp_path, capsys):
     path.write_text("# kind: zigzag\n" + "".join(f"{r:g},{z:g}\n" for r, z in _points(GOBLET)))
     assert cli.main([str(path)]) == 2
     assert f"{path}, line 1: unknown profile kind 'zigzag'" in capsys.readouterr().err
+    assert cli.main([str(path), "--kind", "polyline"]) == 0  # --kind overrides the file's line
+    assert "valid polyline profile" in capsys.readouterr().out
     # Through the shape: the file and its line, not a 'kind' parameter the user never set
     with pytest.raises(Exception, match=f"{path}, line 1: unknown profile kind 'zigzag'"):
         mi.load_dict({"type": "lathe", "filename": str(path)})

@@ -199,10 +199,11 @@ def _report(prog: str, error: BaseException) -> int:
 
 
 class _ClosedPipeSafe:
-    """A command's standard output that outlives its reader: once the
-    reader has gone (``lathe-profile --from-pov f.pov | head -1``), what the
-    command prints goes nowhere and the command finishes its work (its
-    files), instead of stopping at the next print with "Broken pipe"."""
+    """A command's standard output (or error) that outlives its reader:
+    once the reader has gone (``lathe-profile --from-pov f.pov | head -1``),
+    what the command prints there goes nowhere and the command finishes its
+    work (its files), instead of stopping at the next print with "Broken
+    pipe"."""
 
     def __init__(self, stream) -> None:
         self._stream = stream
@@ -248,8 +249,11 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
     here, with that status, without waiting for the render or for the
     interpreter's shutdown."""
     interrupts.set_prog(prog)  # (the watcher's message, in a command process)
-    if argv is None and not isinstance(sys.stdout, _ClosedPipeSafe) and sys.stdout is not None:
-        sys.stdout = _ClosedPipeSafe(sys.stdout)
+    if argv is None:  # (a command process: its output streams may be pipes)
+        if sys.stdout is not None and not isinstance(sys.stdout, _ClosedPipeSafe):
+            sys.stdout = _ClosedPipeSafe(sys.stdout)
+        if sys.stderr is not None and not isinstance(sys.stderr, _ClosedPipeSafe):
+            sys.stderr = _ClosedPipeSafe(sys.stderr)
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:

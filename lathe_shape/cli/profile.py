@@ -177,8 +177,8 @@ def check_or_convert(args: argparse.Namespace) -> int:
                           strict_curves=args.strict_curves)
     points, sharp, labels = read_points(args.input)
     kinds = profile_kinds()
-    # (an unknown '# kind:' is refused here, naming the file and line)
-    declared = read_profile_options(args.input, [k.name for k in kinds.values()])
+    # (an unknown '# kind:' is refused here, naming the file and line, unless --kind overrides it)
+    declared = read_profile_options(args.input, None if args.kind else [k.name for k in kinds.values()])
     if args.kind is not None:
         record = kinds[args.kind]
     else:

@@ -124,9 +124,11 @@ def _sweep_values(key: str, values: str, item: str) -> list[str]:
         raise CliError(f"-D {item}: a value is empty")
     for value in out:
         if out.count(value) > 1:
-            raise CliError(
-                f"-D {key} lists the value {value!r} {out.count(value)} times; a value that holds commas "
-                f"(a colour) goes in parentheses: -D '{key}=({values.strip()})'")
+            hint = ""
+            if len(out) == 3:  # (a colour's three components, most likely)
+                hint = ("; a value that holds commas (a colour) goes in parentheses: "
+                        f"-D '{key}=({values.strip()})'")
+            raise CliError(f"-D {key} lists the value {value!r} {out.count(value)} times{hint}")
     return out
 
 

@@ -82,4 +82,4 @@ def refuse_negative_extinction(scene: mi.Scene, integrator: str) -> None:
         shown = ", ".join(f"{v:g}" for v in values)
         raise ValueError(
             f"{_name(medium, medium.class_name())}: its extinction 'sigma_t' times 'scale' is ({shown}); "
-            f"both must be >= 0 (the integrator {integrator} would render NaN pixels)")
+            f"it must be >= 0 (the integrator {integrator} would render NaN pixels)")

@@ -365,7 +365,10 @@ def _unused_defines_message(message: str, path: str, text: str) -> str | None:
     if "Found unused parameters" not in message:
         return None
     unused = re.findall(r"\$(\w+)=", message)
-    declared = sorted(set(re.findall(r"<default\s+name=\"(\w+)\"", text)))
+    declared = sorted(set(re.findall(r"<default\b[^>]*\bname\s*=\s*[\"'](\w+)[\"']", text)))
+    if unused and all(name in declared for name in unused):
+        return (f"{path}: -D {', '.join(unused)}: the scene declares it as a <default> but uses no "
+                f"${unused[0]} anywhere")
     listed = ", ".join(declared) if declared else "none"
     return (f"{path}: -D {', '.join(unused)}: the scene uses no such parameter (its <default> "
             f"parameters: {listed})")

@@ -94,6 +94,12 @@ def test_more_errors(tmp_path):
     assert misspelled.returncode == 2 and misspelled.stderr == (
         f"lathe-render: error: {scene}: -D max_depht: the scene uses no such parameter "
         "(its <default> parameters: none)\n")
+    declared = tmp_path / "declared.xml"
+    declared.write_text(NO_INTEGRATOR.replace("<emitter", "<default name='tint' value='1'/>\n    <emitter"))
+    unused = run_cli(str(declared), "-D", "tint=2", "--resolution", "8x8", "-o", str(tmp_path / "o"))
+    assert unused.returncode == 2 and unused.stderr == (
+        f"lathe-render: error: {declared}: -D tint: the scene declares it as a <default> but uses no $tint "
+        "anywhere\n")
 
 
 COMMANDS = ["lathe_shape.cli.render", "lathe_shape.cli.turntable", "lathe_shape.cli.compare"]

@@ -6,6 +6,8 @@ every kind."""
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 
 import drjit as dr
 import mitsuba as mi
@@ -169,3 +171,17 @@ def test_to_polyline_for_every_kind(tmp_path, capsys, kind, text, extra):
     poly = tmp_path / "p_40.csv"
     shape = mi.load_dict({"type": "lathe", "filename": str(poly)})
     assert shape.profile.open_sheet == bool(extra) and len(shape.profile.points) >= 39
+
+
+def test_import_finishes_when_its_reader_has_gone(pov_file, tmp_path):
+    """``lathe-profile --from-pov f.pov 2>&1 | head -1``: the reader goes
+    after one line; the import still writes every object (it stopped at the
+    next print with "Broken pipe", 2 of 4 objects written) and exits 0."""
+    out = tmp_path / "piped"
+    proc = subprocess.Popen([sys.executable, "-m", "lathe_shape.cli.profile", "--from-pov", str(pov_file),
+                             "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    proc.stdout.readline()
+    proc.stdout.close()  # the reader has gone
+    assert proc.wait(timeout=120) == 0
+    assert sorted(p.name for p in out.glob("*.xml")) == sorted(
+        f"{name}.xml" for name in ("Vase", "Goblet", "scene_lathe3", "scene_lathe4", "scene_sor1"))

@@ -110,7 +110,7 @@ def test_hollow_glass_gradient_script(capsys):
         (["--steps", "0.01", "-0.01"], "--steps must be positive, got 0.01 -0.01"),
         (["--resolution", "32x16"], "--resolution must be square, got '32x16'"),
         (["--spp", "0"], "--spp must be at least 1, got 0"),
-        (["--resolution", "16", "--spp", "1"], "at 16x16 the glass has 0 interior pixels"),
+        (["--resolution", "16", "--spp", "1"], "--resolution must be at least 32, got 16"),
     ]:
         assert script.main([*argv, "--variant", VARIANT]) == 2
         err = capsys.readouterr().err
