@@ -70,10 +70,11 @@ __version__ = "0.1.0"
 #: box) runs the next queued constructor on the same thread: constructors
 #: nest, a few Python frames each. Under the default limit of 1000 a few
 #: hundred lathes (fewer under a deep caller such as a test runner) ended
-#: in a RecursionError. With 4000, 1000 lathes load in parallel and 3000
-#: still end in the RecursionError; a higher limit let the loader threads
-#: run out of C stack first (4000 lathes crashed with a limit of 20000).
-#: The package's own loading is sequential (tools/scenes.py) and never nests.
+#: in a RecursionError. A constructor nested in another now only queues
+#: its mesh, which the outermost writes (nesting at most 2 deep: 10,000
+#: lathes load in parallel, docs/limits.md); this limit stays as a margin
+#: for other Python plugins nesting there. The package's own loading is
+#: sequential (tools/scenes.py) and never nests.
 RECURSION_LIMIT = 4_000
 if _sys.getrecursionlimit() < RECURSION_LIMIT:
     _sys.setrecursionlimit(RECURSION_LIMIT)

@@ -1,6 +1,6 @@
 #!/bin/bash
 # The CUDA checks of one short GPU session, in one run: the tests whose
-# results depend most on the backend (caustics, gradients through glass,
+# results depend most on the backend (caustics, gradients through glass, glass outlines,
 # coincident walls), the caustics and gradient benchmarks, then the rest of
 # the suite in the time left. Every step writes its log to OUTPUT as it
 # goes, so a run stopped at a time limit still leaves what it did.
