@@ -561,7 +561,7 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         bs, bsdf_weight = bsdf.sample(ctx, si_detached, sample_1, sample_2, active_next)
         wo_world = si_detached.to_world(bs.wo)
         if check != "none":
-            bad_out = active_next & contradicts(si_detached, cos_in_geo, bs, wo_world)
+            bad_out = active_next & contradicts(si_detached, cos_in_geo, bs, wo_world, bsdf_weight)
             if check == "fallback":
                 # Drawn again in the geometric frame (the same call site)
                 sample_1 = dr.select(bad_out, sampler.next_1d(), sample_1)
