@@ -65,10 +65,11 @@ from .caustic_path_state import caustic_emitter_factor, caustic_vertex, start_ca
 from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
+from .lathe_path import AOV_CHANNELS, guide_channels, parse_aovs
 from .line_walk import LineWalk, start_walk
 from .media_check import refuse_negative_extinction
 from .media_segments import heterogeneous_medium
-from .params import path_parameters
+from .params import path_parameters, typed_property
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
@@ -139,6 +140,21 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
          light and the diffuse surface, and between the diffuse surface and
          the camera, on a light-traced caustic path (the two together also
          bounded by ``max_depth`` - 2). (Default: 8)
+
+     * - aovs
+       - |string|
+       - Comma-separated guide images for a denoiser, appended after the
+         image's channels, as for ``lathe_path``: ``albedo`` and ``nn``,
+         taken on the exact lathes. Where a path scatters in a medium before
+         its guide vertex, the guides are taken there: the albedo is the
+         path's throughput so far, the normal faces the camera ray.
+         (Default: none)
+
+     * - aov_through_delta
+       - |bool|
+       - As for ``lathe_path``: the guides at the first vertex whose BSDF is
+         not a Dirac delta (``true``), or at the first surface hit.
+         (Default: true)
     """
 
     plugin_name = "lathe_volpath"
@@ -150,8 +166,15 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         depths = path_parameters(props, type(self).plugin_name)
         super().__init__(props)
         self.max_depth, self.rr_depth, self.hide_emitters = depths
+        who = self.plugin_name
+        #: The guide images rendered as AOVs (see ``aovs``).
+        self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who), who)
+        if self.aovs and not mi.is_rgb:
+            raise ValueError(f"{who}: parameter 'aovs' needs an RGB variant (the guides are RGB images); "
+                             f"this is '{mi.variant()}'")
+        self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
         #: The caustic parameters (caustic_render.py)
-        self.caustic_settings = CausticSettings.read(props, self.plugin_name)
+        self.caustic_settings = CausticSettings.read(props, who)
         #: While a render with caustics runs: (tracer, particles per camera
         #: sample as an opaque Float, eq. 40's deferred solves) for the traced sample().
         self._caustic_render = None
@@ -276,6 +299,11 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         tracer, per_camera_sample, deferred = caustics if caustics is not None else (None, None, None)
         caustic_path = start_caustic_path(ray.d)  # Eqs. 32, 40: is the path a caustic path?
                                                   # (caustic_path_state.py)
+        want_guides = len(self.aovs) > 0
+        through_delta = self.aov_through_delta
+        albedo = mi.Spectrum(0.0)            # Albedo guide (AOV)
+        normal = mi.Vector3f(0.0)            # Normal guide (AOV)
+        guide_open = mi.Bool(want_guides)    # Lanes whose guide vertex is still ahead
 
         if dr.hint(self.hide_emitters, mode="scalar"):
             ray = geometry.skip_area_emitters(ray, active)
@@ -336,8 +364,25 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
                                                    beta * mis_bsdf * emitted)
             L[seen] += beta * mis_bsdf * emitted
 
+            missed = on_surface & ~si.is_valid()
             on_surface &= si.is_valid()
             bsdf = si.bsdf(ray)
+
+            # ------------- Denoiser guides (the aovs parameter) -------------
+            if dr.hint(want_guides, mode="scalar"):
+                smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                here = guide_open & on_surface & (smooth if through_delta else True)
+                reflectance = dr.select(smooth, bsdf.eval_diffuse_reflectance(si, here), 1.0)
+                albedo[here] = dr.clip(beta * reflectance, 0.0, 1.0)
+                normal[here] = dr.select(mi.Frame3f.cos_theta(si.wi) < 0.0, -si.sh_frame.n, si.sh_frame.n)
+                # A scattering event in a medium first: the guides there
+                in_volume = guide_open & scatter
+                albedo[in_volume] = dr.clip(beta, 0.0, 1.0)
+                normal[in_volume] = -ray.d
+                # A miss shows the emitter seen
+                gone = guide_open & missed
+                albedo[gone] = dr.clip(beta * emitted, 0.0, 1.0)
+                guide_open &= ~(here | in_volume | gone)
 
             # ---------------------- Emitter sampling ----------------------
             phase = mei.medium.phase_function()
@@ -410,15 +455,15 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
             beta[rr_active] *= dr.rcp(rr_prob)
             active &= ~rr_active | (sampler.next_1d(rr_active) < rr_prob)
 
-        return dr.select(valid_ray, L, 0.0), valid_ray, []
+        return dr.select(valid_ray, L, 0.0), valid_ray, guide_channels(self.aovs, albedo, normal)
 
     def aov_names(self) -> list[str]:
-        return []
+        return [channel for name in self.aovs for channel in AOV_CHANNELS[name]]
 
     def to_string(self) -> str:
         depth = -1 if self.max_depth == 0xFFFFFFFF else self.max_depth
         return (f"LatheVolpathIntegrator[max_depth={depth}, rr_depth={self.rr_depth}, "
-                f"hide_emitters={self.hide_emitters}]")
+                f"hide_emitters={self.hide_emitters}, aovs='{','.join(self.aovs)}']")
 
 
 def register() -> None:

@@ -222,3 +222,33 @@ def test_index_matched_filled_glass_white_furnace():
     img = mi.render(scene, seed=0).numpy()[..., :3]
     print(img.mean(), img.min(), img.max())
     assert abs(img.mean() - 1.0) < 0.01
+
+
+def test_volpath_guides_match_lathe_path_and_follow_the_exact_lathe():
+    """``aovs`` on lathe_volpath: without media its albedo and normal guides
+    converge to lathe_path's (the same definition: the first non-delta
+    vertex seen through the glass); in the green bottle they stay albedos
+    (in [0, 1]) and unit normals. Before, lathe_volpath had no guides, and a
+    denoised turntable took Mitsuba's aov integrator's, on the reference
+    mesh."""
+    if mi.is_polarized or not mi.is_rgb:
+        pytest.skip("guides need an RGB variant")
+    guides = {}
+    for integrator in ("lathe_path", "lathe_volpath"):
+        scene = bottle_scene("none", integrator)
+        chosen = mi.load_dict({"type": integrator, "max_depth": 16, "aovs": "albedo,nn", "caustics": False})
+        assert chosen.aov_names() == ["albedo.R", "albedo.G", "albedo.B", "nn.X", "nn.Y", "nn.Z"]
+        image = np.array(mi.render(scene, integrator=chosen, spp=64, seed=2))
+        assert image.shape[2] == 3 + 6 or image.shape[2] == 4 + 6, image.shape
+        guides[integrator] = image[..., -6:]
+    path, volpath = guides["lathe_path"], guides["lathe_volpath"]
+    assert np.abs(volpath[..., :3].mean() - path[..., :3].mean()) < 0.02 * path[..., :3].mean()
+    set_normals = np.linalg.norm(path[..., 3:], axis=-1) > 0.5
+    assert set_normals.mean() > 0.5
+    assert np.abs(volpath[..., 3:] - path[..., 3:])[set_normals].mean() < 0.05
+    green = bottle_scene("green", "lathe_volpath")
+    chosen = mi.load_dict({"type": "lathe_volpath", "max_depth": 16, "aovs": "albedo,nn"})
+    image = np.array(mi.render(green, integrator=chosen, spp=16, seed=2))[..., -6:]
+    assert (image[..., :3] >= 0.0).all() and (image[..., :3] <= 1.0).all()
+    lengths = np.linalg.norm(image[..., 3:], axis=-1)  # (pixel means of unit normals: at most 1)
+    assert (lengths <= 1.0 + 1e-3).all() and (lengths > 0.5).mean() > 0.5
