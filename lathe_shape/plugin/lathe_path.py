@@ -66,6 +66,27 @@ def parse_aovs(text: str, who: str = "lathe_path") -> tuple[str, ...]:
     return names
 
 
+def guide_parameters(props: mi.Properties, who: str) -> tuple[tuple[str, ...], bool]:
+    """The ``aovs`` (parsed, see :func:`parse_aovs`; RGB variants only) and
+    ``aov_through_delta`` parameters of a path tracer, errors naming
+    ``who``."""
+    aovs = parse_aovs(typed_property(props, "aovs", str, "", who), who)
+    if aovs and not mi.is_rgb:
+        raise ValueError(f"{who}: parameter 'aovs' needs an RGB variant (the guides are RGB images); "
+                         f"this is '{mi.variant()}'")
+    return aovs, typed_property(props, "aov_through_delta", bool, True, who)
+
+
+def surface_guides(bsdf: mi.BSDFPtr, si: mi.SurfaceInteraction3f, beta: mi.Spectrum, smooth: mi.Bool,
+                   active: mi.Bool) -> tuple[mi.Spectrum, mi.Vector3f]:
+    """The guides at a surface vertex: the albedo (the diffuse reflectance
+    where the BSDF is smooth, else 1, times the path throughput ``beta``,
+    clipped to [0, 1]) and the shading normal turned to face the ray."""
+    reflectance = dr.select(smooth, bsdf.eval_diffuse_reflectance(si, active), 1.0)
+    facing = dr.select(mi.Frame3f.cos_theta(si.wi) < 0.0, -si.sh_frame.n, si.sh_frame.n)
+    return dr.clip(beta * reflectance, 0.0, 1.0), facing
+
+
 def guide_channels(aovs: tuple[str, ...], albedo: mi.Spectrum, normal: mi.Vector3f) -> list[mi.Float]:
     """The AOV channels of the guides ``aovs`` (none without guides: the
     albedo is then not read, so it may be any spectrum)."""
@@ -165,14 +186,8 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
         super().__init__(props)
         self.max_depth, self.rr_depth, self.hide_emitters = depths
         self.normal_check = normal_check_parameter(props, who)
-        #: The guide images rendered as AOVs (see ``aovs``).
-        self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who))
-        if self.aovs and not mi.is_rgb:
-            raise ValueError(
-                f"lathe_path: parameter 'aovs' needs an RGB variant (the guides are RGB images); "
-                f"this is '{mi.variant()}'"
-            )
-        self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
+        #: The guide images rendered as AOVs (see ``aovs``), and where.
+        self.aovs, self.aov_through_delta = guide_parameters(props, who)
         #: The caustic parameters (caustic_render.py)
         self.caustic_settings = CausticSettings.read(props, who)
         #: While a render with caustics runs: (tracer, particles per camera
@@ -281,10 +296,7 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
             if dr.hint(want_guides, mode="scalar"):
                 smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
                 here = guide_open & active & valid & (smooth if through_delta else True)
-                reflectance = dr.select(smooth, bsdf.eval_diffuse_reflectance(si, here), 1.0)
-                albedo[here] = dr.clip(beta * reflectance, 0.0, 1.0)
-                facing = dr.select(mi.Frame3f.cos_theta(si.wi) < 0.0, -si.sh_frame.n, si.sh_frame.n)
-                normal[here] = facing
+                albedo[here], normal[here] = surface_guides(bsdf, si, beta, smooth, here)
                 # A miss (or a path ended by max_depth) shows the emitter seen.
                 gone = guide_open & active & (~valid | ~active_next)
                 albedo[gone & ~here] = dr.clip(beta * emitted, 0.0, 1.0)

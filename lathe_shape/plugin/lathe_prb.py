@@ -56,7 +56,7 @@ from .integrator_base import (
     with_geometric_frame,
 )
 from .lane_sampler import lane_sampler, unpaired_lane_sampler
-from .params import typed_property
+from .params import path_parameters, typed_property
 from .scene_geometry import ExactSceneGeometry
 from .silhouette import outline_backward, outline_forward, outline_samples
 from .variants import cuda_callable_safe_kernels, register_jit_plugin
@@ -224,14 +224,9 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
 
     def __init__(self, props: mi.Properties) -> None:
         who = type(self).plugin_name
-        # Checked before Mitsuba's RBIntegrator reads them (it takes any type)
-        max_depth = typed_property(props, "max_depth", int, 6, who)
-        if max_depth < -1:
-            raise ValueError(f"{who}: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}")
-        rr_depth = typed_property(props, "rr_depth", int, 5, who)
-        if rr_depth <= 0:
-            raise ValueError(f"{who}: parameter 'rr_depth' must be > 0, got {rr_depth}")
-        typed_property(props, "hide_emitters", bool, False, who)
+        # Checked before Mitsuba's RBIntegrator reads them (it takes any type
+        # and keeps its own copies; its default depth is 6)
+        path_parameters(props, who, max_depth_default=6)
         super().__init__(props)
         self.normal_check = normal_check_parameter(props, who)
         self.silhouette = typed_property(props, "silhouette", bool, True, who)

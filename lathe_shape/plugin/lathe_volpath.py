@@ -65,11 +65,11 @@ from .caustic_path_state import caustic_emitter_factor, caustic_vertex, start_ca
 from .caustic_paths import CausticTracer
 from .caustic_render import CausticSettings, caustic_setup, render_with_caustics
 from .integrator_base import ExactLatheSamplingIntegrator, mis_weight
-from .lathe_path import AOV_CHANNELS, guide_channels, parse_aovs
+from .lathe_path import AOV_CHANNELS, guide_channels, guide_parameters, surface_guides
 from .line_walk import LineWalk, start_walk
 from .media_check import refuse_negative_extinction
 from .media_segments import heterogeneous_medium
-from .params import path_parameters, typed_property
+from .params import path_parameters
 from .scene_geometry import ExactSceneGeometry
 from .variants import register_jit_plugin
 
@@ -167,12 +167,8 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
         super().__init__(props)
         self.max_depth, self.rr_depth, self.hide_emitters = depths
         who = self.plugin_name
-        #: The guide images rendered as AOVs (see ``aovs``).
-        self.aovs = parse_aovs(typed_property(props, "aovs", str, "", who), who)
-        if self.aovs and not mi.is_rgb:
-            raise ValueError(f"{who}: parameter 'aovs' needs an RGB variant (the guides are RGB images); "
-                             f"this is '{mi.variant()}'")
-        self.aov_through_delta = typed_property(props, "aov_through_delta", bool, True, who)
+        #: The guide images rendered as AOVs (see ``aovs``), and where.
+        self.aovs, self.aov_through_delta = guide_parameters(props, who)
         #: The caustic parameters (caustic_render.py)
         self.caustic_settings = CausticSettings.read(props, who)
         #: While a render with caustics runs: (tracer, particles per camera
@@ -372,9 +368,7 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
             if dr.hint(want_guides, mode="scalar"):
                 smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
                 here = guide_open & on_surface & (smooth if through_delta else True)
-                reflectance = dr.select(smooth, bsdf.eval_diffuse_reflectance(si, here), 1.0)
-                albedo[here] = dr.clip(beta * reflectance, 0.0, 1.0)
-                normal[here] = dr.select(mi.Frame3f.cos_theta(si.wi) < 0.0, -si.sh_frame.n, si.sh_frame.n)
+                albedo[here], normal[here] = surface_guides(bsdf, si, beta, smooth, here)
                 # A scattering event in a medium first: the guides there
                 in_volume = guide_open & scatter
                 albedo[in_volume] = dr.clip(beta, 0.0, 1.0)

@@ -193,7 +193,7 @@ class LatheWhittedIntegrator(ExactLatheSamplingIntegrator):
 
     def __init__(self, props: mi.Properties) -> None:
         # Read before Mitsuba's base class reads it (whose type error names no plugin)
-        typed_property(props, "hide_emitters", bool, False, type(self).plugin_name)
+        hide_emitters = typed_property(props, "hide_emitters", bool, False, type(self).plugin_name)
         super().__init__(props)
         who = self.plugin_name
         self.max_depth = typed_property(props, "max_depth", int, 10, who)
@@ -209,7 +209,7 @@ class LatheWhittedIntegrator(ExactLatheSamplingIntegrator):
                 f"(expected one of: {', '.join(SHADOW_MODES)})"
             )
         self.normal_check = normal_check_parameter(props, who)
-        self.hide_emitters = typed_property(props, "hide_emitters", bool, False, who)
+        self.hide_emitters = hide_emitters
 
     @dr.syntax
     def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,

@@ -47,11 +47,11 @@ def typed_property(props: mi.Properties, name: str, kind: type, default, who: st
     return value
 
 
-def path_parameters(props: mi.Properties, who: str) -> tuple[int, int, bool]:
-    """``max_depth`` (-1: infinite, returned as 0xFFFFFFFF), ``rr_depth``
-    and ``hide_emitters`` of a path tracer, as Mitsuba's ``path`` reads
-    them, with errors naming ``who``."""
-    max_depth = typed_property(props, "max_depth", int, -1, who)
+def path_parameters(props: mi.Properties, who: str, max_depth_default: int = -1) -> tuple[int, int, bool]:
+    """``max_depth`` (-1: infinite, returned as 0xFFFFFFFF; default
+    ``max_depth_default``), ``rr_depth`` and ``hide_emitters`` of a path
+    tracer, as Mitsuba's ``path`` reads them, with errors naming ``who``."""
+    max_depth = typed_property(props, "max_depth", int, max_depth_default, who)
     if max_depth < -1:
         raise ValueError(f"{who}: parameter 'max_depth' must be -1 (infinite) or >= 0, got {max_depth}")
     rr_depth = typed_property(props, "rr_depth", int, 5, who)
