@@ -365,7 +365,10 @@ def _unused_defines_message(message: str, path: str, text: str) -> str | None:
     if "Found unused parameters" not in message:
         return None
     unused = re.findall(r"\$(\w+)=", message)
-    declared = sorted(set(re.findall(r"<default\b[^>]*\bname\s*=\s*[\"'](\w+)[\"']", text)))
+    try:  # (the scene's own <default> elements; none listed for text only Mitsuba's parser reads)
+        declared = sorted({e.get("name", "") for e in _parse_xml(text, path).iter("default")} - {""})
+    except SceneSyntaxError:
+        declared = []
     if unused and all(name in declared for name in unused):
         return (f"{path}: -D {', '.join(unused)}: the scene declares it as a <default> but uses no "
                 f"${unused[0]} anywhere")
