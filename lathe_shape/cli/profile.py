@@ -290,7 +290,7 @@ def import_pov(path: str, output: str | None, scene: str | None = None,
         for s in shapes:
             s.csv = relative_csv(s.csv, scene)
         with open(scene, "w", encoding="utf-8") as f:
-            f.write(scene_xml(shapes, path))
+            f.write(scene_xml(shapes, path, scene_file=scene))
         print(f"wrote the scene {scene} ({sum(len(s.to_worlds) for s in shapes)} shapes): "
               f"lathe-render {scene}")
     if failed:

@@ -353,6 +353,13 @@ def pending_frames(job: Job, frames: FramePlan) -> array:
     notes = [f"{skipped} finished frame(s) skipped"] if skipped else []
     if stale:
         notes.append(f"{stale} frame(s) of a different job (count, spp, seed, ...) rendered again")
+        # The animations in the folder show that job's frames: gone, unless
+        # this run writes them anew
+        for fmt in VIDEOS:
+            name = f"turntable.{fmt}"
+            if name in present and not getattr(job.args, fmt):
+                os.remove(os.path.join(job.out_dir, name))
+                notes.append(f"{name} of that job removed")
     if notes:
         print("  " + "; ".join(notes), flush=True)
     return todo

@@ -28,10 +28,17 @@ class AttachedHit:
         self.t, self.p, self.n, self.sh_n = t, p, n, sh_n
 
 
-def _point(points: mi.Float, index: mi.UInt32, active) -> mi.Point2f:
-    """User point ``index`` as ``(r, z)``."""
-    return mi.Point2f(dr.gather(mi.Float, points, 2 * index, active),
-                      dr.gather(mi.Float, points, 2 * index + 1, active))
+def _point(points: mi.Float, index: mi.UInt32, active, held: mi.Bool | None = None) -> mi.Point2f:
+    """User point ``index`` as ``(r, z)``. Where ``held`` (per user point)
+    is set, the point lies on the axis and stays there: its ``r`` is 0 with
+    no derivative (a profile's ends on the axis are a constraint, not a
+    free coordinate; an optimiser that moved one off the axis by its
+    rounding-sized or B-spline-sized derivative made an open profile, which
+    the next update refused)."""
+    r = dr.gather(mi.Float, points, 2 * index, active)
+    if held is not None:
+        r = dr.select(dr.gather(mi.Bool, held, index, active), 0.0, r)
+    return mi.Point2f(r, dr.gather(mi.Float, points, 2 * index + 1, active))
 
 
 def _controls(points: mi.Float, index, seg: mi.UInt32, active) -> list[mi.Point2f]:
@@ -42,22 +49,24 @@ def _controls(points: mi.Float, index, seg: mi.UInt32, active) -> list[mi.Point2
     controls = []
     for k in range(4):
         if index.weights is None:
-            controls.append(_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k, active), active))
+            controls.append(_point(points, dr.gather(mi.UInt32, index.controls, 4 * seg + k, active), active,
+                                   index.held))
             continue
         control = mi.Point2f(0.0)
         for j in range(width):
             slot = (4 * seg + k) * width + j
             weight = dr.gather(mi.Float, index.weights, slot, active)
-            control += weight * _point(points, dr.gather(mi.UInt32, index.controls, slot, active), active)
+            control += weight * _point(points, dr.gather(mi.UInt32, index.controls, slot, active), active,
+                                       index.held)
         controls.append(control)
     return controls
 
 
-def _segment(points: mi.Float, ends: mi.UInt32, seg: mi.UInt32, active):
+def _segment(points: mi.Float, index, seg: mi.UInt32, active):
     """Start point, direction and outward unit normal (eqs. 8-9) of segment
-    ``seg``."""
-    p0 = _point(points, dr.gather(mi.UInt32, ends, 2 * seg, active), active)
-    p1 = _point(points, dr.gather(mi.UInt32, ends, 2 * seg + 1, active), active)
+    ``seg`` (``index``: the lathe's ``ProfileIndex``)."""
+    p0 = _point(points, dr.gather(mi.UInt32, index.ends, 2 * seg, active), active, index.held)
+    p1 = _point(points, dr.gather(mi.UInt32, index.ends, 2 * seg + 1, active), active, index.held)
     delta = p1 - p0
     normal = mi.Vector2f(-delta.y, delta.x) * dr.rsqrt(dr.squared_norm(delta))
     return p0, delta, normal
@@ -83,15 +92,15 @@ def _corrected(value, residual, slope, ok):
     return dr.select(ok, value - step, value)
 
 
-def _end_normal(points, ends, blend, neighbour, own, seg, end, active) -> mi.Vector2f:
+def _end_normal(points, index, own, seg, end, active) -> mi.Vector2f:
     """Eq. 10's vertex normal at one end (0: start, 1: end) of ``seg``:
     ``normalize(w_own n_seg + w_nb n_neighbour + c)``, whose weights say
     whether the vertex is averaged, a crease, or a smooth cap's axial end
     (see ``ProfileIndex``); the choice itself is fixed (not differentiated)."""
     k = 2 * seg + end
-    w = dr.gather(mi.Vector4f, blend, k, active)
-    nb = dr.gather(mi.UInt32, neighbour, k, active)
-    _, _, nb_normal = _segment(points, ends, nb, active & (w.y != 0))
+    w = dr.gather(mi.Vector4f, index.blend, k, active)
+    nb = dr.gather(mi.UInt32, index.neighbour, k, active)
+    _, _, nb_normal = _segment(points, index, nb, active & (w.y != 0))
     v = w.x * own + mi.Vector2f(dr.select(w.y != 0, nb_normal, 0.0)) + mi.Vector2f(w.z, w.w)
     return dr.normalize(v)
 
@@ -105,7 +114,7 @@ def attached_polyline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t:
     ``F = n_r rho(t) + n_z z(t) - c`` (eq. 22), whose root moves by
     ``dt = -dF / (dF/dt)`` with ``dF/dt = n . d`` (eq. 23); ``p`` follows
     eq. 3, ``n`` eqs. 8-9 and ``sh_n`` eq. 10 at the attached point."""
-    p0, delta, normal = _segment(points, index.ends, seg, active)
+    p0, delta, normal = _segment(points, index, seg, active)
     x = o + dr.detach(t) * d  # the detached root on the (possibly moving) ray
     rho, cos_phi, sin_phi = _azimuth(x)
     residual = normal.x * rho + normal.y * x.z - dr.dot(normal, p0)
@@ -118,8 +127,8 @@ def attached_polyline(points: mi.Float, index, o: mi.Point3f, d: mi.Vector3f, t:
         return AttachedHit(t_att, p, n, mi.Vector3f(n))
     # Eq. 10: the end normals interpolated at the attached fraction u
     u = dr.dot(mi.Point2f(rho, p.z) - p0, delta) / dr.squared_norm(delta)
-    n0 = _end_normal(points, index.ends, index.blend, index.neighbour, normal, seg, 0, active)
-    n1 = _end_normal(points, index.ends, index.blend, index.neighbour, normal, seg, 1, active)
+    n0 = _end_normal(points, index, normal, seg, 0, active)
+    n1 = _end_normal(points, index, normal, seg, 1, active)
     sh = dr.normalize(dr.lerp(n0, n1, u))
     return AttachedHit(t_att, p, n, _revolve(sh, cos_phi, sin_phi))
 
@@ -188,5 +197,5 @@ def profile_point(points: mi.Float, index, kernel: str, seg: mi.UInt32,
         controls = _controls(points, index, seg, active)
         value, _ = _curve(controls, u)
         return value.x, value.y
-    p0, delta, _ = _segment(points, index.ends, seg, active)
+    p0, delta, _ = _segment(points, index, seg, active)
     return p0.x + u * delta.x, p0.y + u * delta.y

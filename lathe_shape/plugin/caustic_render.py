@@ -46,7 +46,8 @@ class CausticSettings:
         enabled = typed_property(props, "caustics", bool, True, who)
         paths = typed_property(props, "caustic_paths", float, CAUSTIC_PATHS, who)
         if not (paths > 0.0 and paths < 1e6):
-            raise ValueError(f"{who}: parameter 'caustic_paths' must be > 0 and finite; got {paths}")
+            raise ValueError(f"{who}: parameter 'caustic_paths' must be > 0 and below 1e6 (particles "
+                             f"per camera sample); got {paths}")
         chains = typed_property(props, "caustic_camera_chains", float, CAUSTIC_CAMERA_CHAINS, who)
         if not (0.0 <= chains <= 1.0):
             raise ValueError(f"{who}: parameter 'caustic_camera_chains' must be in [0, 1]; got {chains}")

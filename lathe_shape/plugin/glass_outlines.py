@@ -59,7 +59,7 @@ import numpy as np
 from ..kernels.attached import profile_point
 from ..surfaces import kind_of
 from .attached_hits import attach_lathe_hits, attached_direction, differentiable_lathes
-from .edge_terms import add_edge_tangents, backward_edge_terms, jit_array
+from .edge_terms import add_edge_tangents, backward_edge_terms, jit_array, numpy_array
 
 __all__ = ["GLASS_OUTLINE_LINES", "GlassCrossings", "glass_outline_backward", "glass_outline_crossings",
            "glass_outline_forward"]
@@ -212,7 +212,7 @@ def _bisect(geometry, lathes: list, sensor: mi.Sensor, a: _Lanes, b: _Lanes, ver
         x_a = dr.select(same, middle, x_a)
         x_b = dr.select(same, x_b, middle)
         step += 1
-    x_a, x_b = (np.array(x, dtype=np.float64).T[:count] for x in (x_a, x_b))
+    x_a, x_b = (numpy_array(x, np.float64)[:count] for x in (x_a, x_b))
     return a.take(np.arange(count)).at(x_a), b.take(np.arange(count)).at(x_b)
 
 
@@ -277,8 +277,8 @@ def _chain(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, vertices: i
     dr.eval(*(getattr(store, name) for name in fields))
     out = {}
     for name in fields:
-        value = np.array(getattr(store, name))
-        value = value.T.reshape(vertices, n, -1) if value.ndim == 2 else value.reshape(vertices, n)
+        value = numpy_array(getattr(store, name))
+        value = value.reshape(vertices, n, -1) if value.ndim == 2 else value.reshape(vertices, n)
         value = value[:, :count]
         out[name] = value.astype(bool) if name in ("go", "optional", "sure") else value
     return _Chain(**out)
@@ -387,7 +387,7 @@ def _screen_region(sensor: mi.Sensor, lathes: list) -> tuple[np.ndarray, np.ndar
     it = dr.zeros(mi.Interaction3f, len(corners))
     it.p = jit_array(mi.Point3f, corners.T)
     ds, _ = sensor.sample_direction(it, mi.Point2f(0.5))
-    image = np.array(ds.uv, dtype=np.float64).T
+    image = numpy_array(ds.uv, np.float64)
     low = np.clip(np.floor(image.min(axis=0)) - 1, 0, [width, height]).astype(int)
     high = np.clip(np.ceil(image.max(axis=0)) + 1, 0, [width, height]).astype(int)
     return low, np.maximum(high, low)
@@ -604,7 +604,7 @@ def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, 
     # (the paths go on from vertex k at its depth, as the image's do)
     depth = jit_array(mi.UInt32, np.tile(crossings.k, 2 * spp))
     radiance = integrator.sample_from(scene, sampler, ray, depth)
-    values = np.array(throughput * radiance).T.reshape(spp, 2, count, -1).mean(axis=0)
+    values = numpy_array(throughput * radiance).reshape(spp, 2, count, -1).mean(axis=0)
     spread = np.abs(crossings.grad_g).sum(axis=1, keepdims=True)
     weight = (values[1] - values[0]) * crossings.scale[:, None] / np.maximum(spread, 1e-30)
     weight[spread[:, 0] <= 0.0] = 0.0

@@ -65,7 +65,8 @@ def refuse_negative_extinction(scene: mi.Scene, integrator: str) -> None:
     extinction ``sigma_t`` times ``scale`` that is negative or not a
     number: ``integrator`` would render NaN pixels (a negative RGB
     ``sigma_t`` Mitsuba refuses itself; a negative ``scale`` or float
-    ``sigma_t`` it accepts)."""
+    ``sigma_t`` it accepts); or an ``albedo`` outside [0, 1] (Mitsuba
+    accepts it, and the render gains or loses energy)."""
     media = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
     seen = set()
     for medium in media:
@@ -75,11 +76,20 @@ def refuse_negative_extinction(scene: mi.Scene, integrator: str) -> None:
         mei = dr.zeros(mi.MediumInteraction3f, 1)
         if mi.is_spectral:
             mei.wavelengths = mi.Spectrum(550.0)
-        _, _, sigma_t = medium.get_scattering_coefficients(mei, mi.Bool(True))
+        sigma_s, _, sigma_t = medium.get_scattering_coefficients(mei, mi.Bool(True))
         values = np.array(sigma_t, dtype=np.float64).ravel()
-        if np.all(values >= 0.0):
+        if not np.all(values >= 0.0):
+            shown = ", ".join(f"{v:g}" for v in values)
+            raise ValueError(
+                f"{_name(medium, medium.class_name())}: its extinction 'sigma_t' times 'scale' is ({shown}); "
+                f"it must be >= 0 (the integrator {integrator} would render NaN pixels)")
+        scattering = np.array(sigma_s, dtype=np.float64).ravel()
+        positive = values > 0.0
+        albedo = np.divide(scattering, values, out=np.zeros_like(values), where=positive)
+        if np.all((albedo >= 0.0) & (albedo <= 1.0 + 1e-6)):
             continue
-        shown = ", ".join(f"{v:g}" for v in values)
+        shown = ", ".join(f"{v:g}" for v in albedo)
         raise ValueError(
-            f"{_name(medium, medium.class_name())}: its extinction 'sigma_t' times 'scale' is ({shown}); "
-            f"it must be >= 0 (the integrator {integrator} would render NaN pixels)")
+            f"{_name(medium, medium.class_name())}: its 'albedo' is ({shown}); it must be in [0, 1] "
+            f"(above 1 the medium scatters more light than it absorbs and scatters away, and "
+            f"{integrator} would add energy; below 0 it would subtract it)")

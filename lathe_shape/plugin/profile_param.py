@@ -102,7 +102,8 @@ class ProfileIndex:
     B-spline controls is a weighted sum of ``width`` user points (eq. 18),
     ``controls`` their indices and ``weights`` their weights (``width`` per
     control, 4 controls per segment); for ``bspline`` ``width`` is 1 and
-    ``weights`` None.
+    ``weights`` None. ``held``: per user point, whether it lies on the
+    axis, where it stays (its ``r`` has no derivative).
     """
 
     ends: mi.UInt32 | None = None
@@ -111,6 +112,7 @@ class ProfileIndex:
     controls: mi.UInt32 | None = None
     weights: mi.Float | None = None
     width: int = 1
+    held: mi.Bool | None = None
 
 
 def _user_index(user: np.ndarray, canonical: np.ndarray) -> np.ndarray:
@@ -192,22 +194,25 @@ def profile_index(surface: PolylineSurface | BSplineSurface) -> ProfileIndex:
     """The :class:`ProfileIndex` of a surface built with :func:`remember_input`."""
     given = surface.given
     profile = surface.profile
+    held = mi.Bool(np.asarray(given.points)[:, 0] == 0.0)
+    dr.make_opaque(held)
     if given.kind in CUBIC_KINDS:
         indices, weights = _cubic_controls(given, profile)
         index = ProfileIndex(controls=mi.UInt32(indices.ravel().astype(np.uint32)),
-                             weights=mi.Float(weights.ravel().astype(np.float32)), width=indices.shape[2])
+                             weights=mi.Float(weights.ravel().astype(np.float32)), width=indices.shape[2],
+                             held=held)
         dr.make_opaque(index.controls, index.weights)
         return index
     if kind_of(surface).kernel == "bspline":
         seg = _bspline_controls(given, profile)
         controls = mi.UInt32(seg.ravel().astype(np.uint32))
         dr.make_opaque(controls)
-        return ProfileIndex(controls=controls)
+        return ProfileIndex(controls=controls, held=held)
     user = _user_index(given.points, profile.points)
     ends = user[profile.segments]
     blend, neighbour = _end_blend(profile, profile.segment_normals())
     index = ProfileIndex(ends=mi.UInt32(ends.ravel().astype(np.uint32)),
                          blend=mi.Float(blend.ravel().astype(np.float32)),
-                         neighbour=mi.UInt32(neighbour.ravel()))
+                         neighbour=mi.UInt32(neighbour.ravel()), held=held)
     dr.make_opaque(index.ends, index.blend, index.neighbour)
     return index

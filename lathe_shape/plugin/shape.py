@@ -17,6 +17,7 @@ mesh with attributes, so lathes that share a BSDF stay lathes.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import os
 import threading
 
@@ -52,15 +53,23 @@ MESH_BUFFERS = ("vertex_positions", "vertex_normals", "vertex_texcoords", "faces
 FACE_BAND_ATTRIBUTE = "face_lathe_band"
 
 
+def _misspelt_hint(props: mi.Properties) -> str:
+    """`` (unknown parameter 'profle': did you mean 'profile'?)`` for a
+    property whose name is close to ``filename`` or ``profile``."""
+    for name in props.keys():
+        close = difflib.get_close_matches(name, ["filename", "profile"], n=1, cutoff=0.7)
+        if close and name not in ("filename", "profile"):
+            return f" (unknown parameter '{name}': did you mean '{close[0]}'?)"
+    return ""
+
+
 def _read_points(props: mi.Properties, who: str) -> tuple[np.ndarray, np.ndarray, list[str], str]:
     """Points from ``filename`` or ``profile`` (exactly one): (points, sharp,
     labels, source)."""
     has_file, has_inline = "filename" in props, "profile" in props
     if has_file == has_inline:
-        raise ProfileError(
-            f"{who}: give exactly one of the parameters 'filename' and 'profile'"
-            + (" (both were given)" if has_file else "")
-        )
+        hint = " (both were given)" if has_file else _misspelt_hint(props)
+        raise ProfileError(f"{who}: give exactly one of the parameters 'filename' and 'profile'{hint}")
     if has_file:
         filename = typed_property(props, "filename", str, "", who)
         path = str(mi.file_resolver().resolve(filename))
@@ -315,19 +324,31 @@ class LatheShape(mi.Mesh):
         that warning waits for the scene (:func:`warn_open_dielectrics`),
         where it is given only if a free end of the sheet meets no other
         sheet's."""
-        bsdf = self.bsdf() if getattr(self.profile, "open_sheet", False) else None
+        open_sheet = getattr(self.profile, "open_sheet", False)
+        bsdf = self.bsdf() if open_sheet else None
         name = str(bsdf).split("[", 1)[0] if bsdf is not None else ""
         #: The open-dielectric warning waiting for the scene (None: none).
         self.open_dielectric_warning = None
+        messages = []
         if name in ("SmoothDielectric", "RoughDielectric"):
-            message = (f"{who}: a {name} BSDF on an open profile (a single sheet, no inside) whose "
-                       f"ends meet no other open lathe's: rays refract into a solid that is not "
-                       f"there; use 'thindielectric' for a thin glass sheet, or close the profile")
+            messages.append(f"{who}: a {name} BSDF on an open profile (a single sheet, no inside) whose "
+                            f"ends meet no other open lathe's: rays refract into a solid that is not "
+                            f"there; use 'thindielectric' for a thin glass sheet, or close the profile")
+        media = [side for side, medium in (("interior", self.interior_medium()),
+                                           ("exterior", self.exterior_medium())) if medium is not None]
+        if open_sheet and media:
+            messages.append(f"{who}: an {' and an '.join(media)} medium on an open profile (a single "
+                            f"sheet, no inside) whose ends meet no other open lathe's: rays that pass "
+                            f"its free ends miss the medium; close the profile, or close the sheet with "
+                            f"other open lathes (a liquid's surface)")
+        if messages:
+            message = "; ".join(messages)
             if self.free_end_rings() is None:
                 mi.Log(mi.LogLevel.Warn, message)
             else:
                 self.open_dielectric_warning = message
-        elif bsdf is not None and not mi.has_flag(bsdf.flags(), mi.BSDFFlags.BackSide):
+        if bsdf is not None and name not in ("SmoothDielectric", "RoughDielectric") \
+                and not mi.has_flag(bsdf.flags(), mi.BSDFFlags.BackSide):
             mi.Log(mi.LogLevel.Warn,
                    f"{who}: a one-sided {name} BSDF on an open profile (a single sheet): its "
                    f"inner side renders black; wrap the BSDF in a 'twosided' one")
@@ -387,14 +408,18 @@ class LatheShape(mi.Mesh):
             "faces": np.ascontiguousarray(faces, dtype=np.uint32),
         }
 
-    def set_to_world(self, matrix: np.ndarray | mi.ScalarTransform4f, scene: mi.Scene | None = None) -> None:
+    def set_to_world(self, matrix: np.ndarray | mi.ScalarTransform4f, scene: mi.Scene | None = None,
+                     *, exact_only: bool = False) -> None:
         """Move the lathe: new local-to-world transform (4x4 matrix or
         ``mi.ScalarTransform4f``).
 
-        Updates the exact intersection and the reference mesh. Pass the scene
-        holding the lathe so Mitsuba rebuilds its acceleration structure (the
-        reference mesh is then updated through ``mi.traverse(scene)``).
-        """
+        Updates the exact intersection and the reference mesh, through
+        ``mi.traverse(scene)`` of ``scene``, the scene holding the lathe, so
+        that Mitsuba rebuilds its acceleration structure: stock integrators
+        trace the mesh, and every integrator traces an emitting lathe's.
+        ``exact_only=True`` (with ``scene`` None) moves only what the
+        package's integrators trace (a turntable's fast path): stock
+        integrators then see the mesh where it was."""
         if isinstance(matrix, (mi.ScalarTransform4f, mi.ScalarTransform4d)):
             matrix = np.array(matrix.matrix, dtype=np.float64)
         matrix = np.asarray(matrix, dtype=np.float64)
@@ -406,6 +431,16 @@ class LatheShape(mi.Mesh):
         if np.linalg.det(matrix[:3, :3]) * np.linalg.det(self.to_world_matrix[:3, :3]) < 0.0:
             # The mesh's face winding was fixed for the original handedness.
             raise ValueError(f"{who}: the new transform mirrors the shape relative to the old one")
+        if scene is None and not exact_only:
+            raise ValueError(
+                f"{who}: pass the scene that holds the lathe, set_to_world(matrix, scene): without it "
+                "Mitsuba's acceleration structure keeps the mesh where it was, and stock integrators "
+                "render a stale shape (exact_only=True moves only what lathe_path and the package's "
+                "other integrators trace)")
+        if scene is None and self.emitter() is not None:
+            raise ValueError(
+                f"{who}: the lathe emits light, and every integrator traces an emitting lathe as its "
+                "mesh: pass the scene that holds it, set_to_world(matrix, scene)")
         buffers = self._mesh_buffers(matrix)
         params = mi.traverse(self if scene is None else scene)
         for name in ("vertex_positions", "vertex_normals"):

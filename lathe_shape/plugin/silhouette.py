@@ -41,7 +41,7 @@ from ..kernels.attached import profile_point
 from ..profiles import bspline as bs
 from ..surfaces import kind_of
 from .attached_hits import differentiable_lathes
-from .edge_terms import add_edge_tangents, backward_edge_terms
+from .edge_terms import add_edge_tangents, backward_edge_terms, jit_array, numpy_array
 from .shape import LatheShape
 
 __all__ = ["OutlineSamples", "outline_backward", "outline_forward", "outline_radiance_difference",
@@ -89,9 +89,9 @@ class OutlineSamples:
 def _project(sensor: mi.Sensor, points: np.ndarray) -> np.ndarray:
     """Image positions (pixels) of world points (n, 3)."""
     it = dr.zeros(mi.Interaction3f, len(points))
-    it.p = mi.Point3f(*np.asarray(points, dtype=np.float32).T)
+    it.p = jit_array(mi.Point3f, np.asarray(points).T)
     ds, _ = sensor.sample_direction(it, mi.Point2f(0.5))
-    return np.array(ds.uv).T.astype(np.float64)
+    return numpy_array(ds.uv, np.float64)
 
 
 def _world(lathe: LatheShape, r, z, phi) -> np.ndarray:
@@ -254,8 +254,8 @@ def attached_outline_positions(sensor: mi.Sensor, lathe: LatheShape, seg, u,
     """Image positions and world points of the material points, attached to
     the profile."""
     r, z = profile_point(lathe.profile_points, lathe.profile_index, kind_of(lathe.surface).kernel,
-                         mi.UInt32(seg.astype(np.uint32)), mi.Float(u.astype(np.float32)))
-    phi = mi.Float(phi.astype(np.float32))
+                         jit_array(mi.UInt32, seg), jit_array(mi.Float, u))
+    phi = jit_array(mi.Float, phi)
     local = mi.Point3f(r * dr.cos(phi), r * dr.sin(phi), z)
     it = dr.zeros(mi.Interaction3f, len(seg))
     it.p = lathe._to_world @ local
@@ -290,7 +290,7 @@ def _side_radiance(scene: mi.Scene, sensor: mi.Sensor, integrator, x: np.ndarray
 def _difference(radiance: mi.Spectrum, normal_dl: np.ndarray, spp: int) -> np.ndarray:
     """``(f_in - f_out) dl`` (n, channels) from :func:`_side_radiance`."""
     length = np.linalg.norm(normal_dl, axis=1, keepdims=True)
-    values = np.array(radiance).T.reshape(spp, 2, len(normal_dl), -1).mean(axis=0)
+    values = numpy_array(radiance).reshape(spp, 2, len(normal_dl), -1).mean(axis=0)
     return (values[0] - values[1]) * np.maximum(length, 1e-30)
 
 
@@ -350,8 +350,7 @@ def _outline_terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, sp
     start = 0
     for (_, seg, _, _, part_normal_dl, part_x, _), (position, _) in zip(parts, positions, strict=True):
         unit = _unit(part_normal_dl)
-        speed = position.x * mi.Float(unit[:, 0].astype(np.float32)) + position.y * mi.Float(
-            unit[:, 1].astype(np.float32))
+        speed = position.x * jit_array(mi.Float, unit[:, 0]) + position.y * jit_array(mi.Float, unit[:, 1])
         column = np.floor(part_x[:, 0]).astype(np.int64)
         row = np.floor(part_x[:, 1]).astype(np.int64)
         inside = (column >= 0) & (column < width) & (row >= 0) & (row < height)

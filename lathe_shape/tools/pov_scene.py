@@ -90,9 +90,10 @@ def _bounds(shapes: list[SceneShape]) -> tuple[np.ndarray, np.ndarray]:
     return pts.min(axis=0), pts.max(axis=0)
 
 
-def scene_xml(shapes: list[SceneShape], source: str, fov: float = 35.0) -> str:
+def scene_xml(shapes: list[SceneShape], source: str, fov: float = 35.0, scene_file: str = "scene.xml") -> str:
     """The scene (module docstring) for ``shapes``; ``source`` names the
-    POV-Ray file in a comment."""
+    POV-Ray file in a comment, ``scene_file`` the scene's own in the
+    command that renders it."""
     lo, hi = _bounds(shapes)
     center = 0.5 * (lo + hi)
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
@@ -108,7 +109,7 @@ def scene_xml(shapes: list[SceneShape], source: str, fov: float = 35.0) -> str:
     out = [f"<!-- Imported from the POV-Ray scene {source} by lathe-profile --from-pov --scene.\n"
            f"     POV-Ray (x, y, z) is Mitsuba (x, z, y): z is up here. Only the lathe and sor\n"
            f"     objects are imported; the camera, light and floor are this importer's.\n\n"
-           f"     lathe-render {{this file}} -D spp=64 -D res=512 -->\n",
+           f"     lathe-render {scene_file} -D spp=64 -D res=512 -->\n",
            '<scene version="3.0.0">\n',
            '    <default name="spp" value="64"/>\n',
            '    <default name="res" value="256"/>\n',

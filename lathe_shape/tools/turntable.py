@@ -264,10 +264,14 @@ class Turntable:
         if self._angle is not None and self._angle == angle_deg:
             return
         if self.mode == "spin":
-            # Stock integrators trace the reference mesh: the scene's
-            # acceleration structure must follow it.
-            self.lathe.set_to_world(spin_matrix(self.lathe_to_world, angle_deg),
-                                    None if self._exact else self.scene)
+            # Stock integrators trace the reference mesh, and every
+            # integrator an emitting lathe's: the scene's acceleration
+            # structure must then follow it.
+            matrix = spin_matrix(self.lathe_to_world, angle_deg)
+            if self._exact and self.lathe.emitter() is None:
+                self.lathe.set_to_world(matrix, exact_only=True)
+            else:
+                self.lathe.set_to_world(matrix, self.scene)
         elif self.mode == "world":
             geometry = self.integrator.geometry(self.scene) if self._exact else None
             self._world.turn(world_matrix(self.lathe_to_world, angle_deg))

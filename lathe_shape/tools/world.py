@@ -71,6 +71,7 @@ class WorldTurner:
 
         self.scene = scene
         self._lathe_scene = scene if shape_scene is None else None
+        self._shape_scene = shape_scene
         self.params = mi.traverse(scene)
         self.shape_params = self.params if shape_scene is None else mi.traverse(shape_scene)
         self.turned: list[_Turned] = []
@@ -134,4 +135,11 @@ class WorldTurner:
         if self.shape_params is not self.params:
             self.shape_params.update()
         for lathe, original in self.lathes:
-            lathe.set_to_world(rotation @ original, self._lathe_scene)
+            if self._lathe_scene is not None:
+                lathe.set_to_world(rotation @ original, self._lathe_scene)
+            elif lathe.emitter() is not None:
+                # Every integrator traces an emitting lathe's mesh: lathe_path
+                # in its scene of the non-lathe shapes, which holds it
+                lathe.set_to_world(rotation @ original, self._shape_scene)
+            else:
+                lathe.set_to_world(rotation @ original, exact_only=True)

@@ -201,12 +201,15 @@ def test_resume_skips_finished_frames(tmp_path, capsys):
     # frame of another job (different spp) and everything with --force.
     data = (out / "frame_0002.exr").read_bytes()
     (out / "frame_0002.exr").write_bytes(data[: len(data) // 2])
+    (out / "turntable.gif").write_bytes(b"GIF89a")  # (an earlier run's animation of these frames)
     code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", *FAST)
     assert code == 0 and "rendered 1 frame(s), skipped 3" in stdout
     code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", "--frames", "3", *FAST[2:],
                           "--spp", "3")
     assert code == 0 and "1 frame(s) of a different job" in stdout and "rendered 1 frame(s)" in stdout
     assert read_exr(out / "frame_0003.exr")[1]["spp"] == 3
+    # (the animation showed the other job's frame: it was left behind, stale)
+    assert "turntable.gif of that job removed" in stdout and not (out / "turntable.gif").exists()
     # So is a frame of another sampler (--multijitter, same spp).
     code, stdout, _ = run(capsys, WINE, "-o", str(out), "--count", "4", "--frames", "3", *FAST[2:],
                           "--spp", "4")

@@ -107,6 +107,43 @@ def test_includes(tmp_path):
         assert any(re.search(r"scene\.pov:1: #include .*only files in the scene's folder", n) for n in notes)
 
 
+@pytest.mark.parametrize("include", ['"colors.inc"\n#include "mine.inc"', '"mine.inc"'])
+def test_a_missing_include_loses_nothing_after_it(tmp_path, include):
+    """A user's own include that is not there: the statements after it
+    were skipped (after an include that was read, the reader stopped and
+    the objects came from the dormant reader, unplaced and with their
+    generated names; as the first line, the object after it went as the
+    failed include's statement)."""
+    path = tmp_path / "scene.pov"
+    path.write_text(f"#include {include}\n"
+                    "#declare Glass = lathe { 4, <0, 0>, <1, 0>, <1, 1>, <0, 1> }\n"
+                    "object { Glass translate <5, 0, 0> }\n"
+                    "object { lathe { 3, <0, 0>, <2, 0>, <0, 2> } translate <-5, 0, 0> }\n")
+    blocks, notes = read_pov_objects(path)
+    assert [(b.name, b.transform[0, 3]) for b in blocks] == [("Glass", 5.0), ("scene_lathe2", -5.0)]
+    missing = [n for n in notes if "mine.inc" in n]
+    assert len(missing) == 1
+    assert re.fullmatch(r".*scene\.pov:\d: #include \"mine\.inc\": file not found in .*", missing[0])
+    folders = missing[0].split("file not found in ")[1].split(", ")
+    assert len(folders) == len(set(folders))  # (each folder once)
+    assert not any("not part of the rendered scene" in n for n in notes)
+
+
+def test_a_bad_statement_fails_alone_after_a_declared_lathe(tmp_path, capsys):
+    """A statement that cannot be read after a #declared lathe took the
+    lathe down with it, blamed on the other line."""
+    path = tmp_path / "scene.pov"
+    path.write_text("#declare L = lathe { 4, <0, 0>, <1, 0>, <1, 1>, <0, 1> }\n"
+                    "#declare X = 1 +;\n"
+                    "object { L translate <5, 0, 0> }\n")
+    out = tmp_path / "out"
+    assert cli.main(["--from-pov", str(path), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"{path}:1: lathe 'L': polyline, 4 points")
+    assert f"{path}:2: expected a number or vector, got ';'" in captured.err
+    assert 'value="1 0 0 5 0 1 0 0 0 0 1 0 0 0 0 1"' in (out / "L.xml").read_text()
+
+
 def test_bounds(tmp_path, monkeypatch):
     monkeypatch.setattr(interpreter, "MAX_ITERATIONS", 1000)
     path = tmp_path / "scene.pov"

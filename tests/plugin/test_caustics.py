@@ -435,13 +435,15 @@ def test_grazing_and_total_internal_reflection_give_finite_values(light_z, pane)
     assert (value >= 0.0).all()
 
 
-PATHS_ERROR = "lathe_path: parameter 'caustic_paths' must be > 0 and finite; got "
+PATHS_ERROR = ("lathe_path: parameter 'caustic_paths' must be > 0 and below 1e6 (particles per camera "
+               "sample); got ")
 CHAINS_ERROR = "lathe_path: parameter 'caustic_camera_chains' must be in [0, 1]; got "
 
 
 @pytest.mark.parametrize("params, message", [
     ({"caustic_paths": 0.0}, PATHS_ERROR + "0.0"),
     ({"caustic_paths": float("nan")}, PATHS_ERROR + "nan"),
+    ({"caustic_paths": 1e9}, PATHS_ERROR + "1000000000.0"),
     ({"caustic_max_chain": 0}, "lathe_path: parameter 'caustic_max_chain' must be >= 1; got 0"),
     ({"caustic_camera_chains": 1.5}, CHAINS_ERROR + "1.5"),
     ({"caustic_camera_chains": float("nan")}, CHAINS_ERROR + "nan"),

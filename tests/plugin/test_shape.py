@@ -61,6 +61,9 @@ def test_filename_resolves_relative_to_scene(tmp_path):
         (lathe_xml(""), "lathe 'glass': give exactly one of the parameters 'filename' and 'profile'"),
         (lathe_xml(f'<string name="profile" value="{GLASS}"/><string name="filename" value="x.csv"/>'),
          "give exactly one of the parameters 'filename' and 'profile' (both were given)"),
+        (lathe_xml(f'<string name="profle" value="{GLASS}"/>'),
+         "lathe 'glass': give exactly one of the parameters 'filename' and 'profile' (unknown parameter "
+         "'profle': did you mean 'profile'?)"),
         (lathe_xml('<string name="filename" value="missing.csv"/>'),
          "lathe 'glass': parameter 'filename': profile file 'missing.csv' not found"),
         (lathe_xml('<string name="profile" value="0 0, -1 1, 0 2"/>'),
@@ -323,3 +326,23 @@ def test_open_dielectric_sheets_closed_by_each_other_do_not_warn():
     assert warn_open_dielectrics(sheets("0 0, 1 0.2, 1.2 1", "1.2 1, 0 1")) == []
     assert warn_open_dielectrics(sheets("0 0, 1 0.2, 1.2 1", "1.2 1.01, 0 1.01")) == [
         OPEN_DIELECTRIC.format("sheet0"), OPEN_DIELECTRIC.format("sheet1")]
+
+
+def test_a_medium_on_an_open_sheet_warns():
+    """An interior medium on an open sheet (a liquid without its surface)
+    rendered without a word: rays that pass the free ends miss the medium.
+    It warns now, naming the lathe, unless other open sheets close it."""
+    from lathe_shape.plugin.shape import warn_open_dielectrics
+
+    def scene(*profiles: str) -> mi.Scene:
+        wine = {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.5}
+        return mi.load_dict({"type": "scene", **{
+            f"liquid{index}": {"type": "lathe", "profile": profile, "open": True, "bsdf": {"type": "null"},
+                               "interior": wine}
+            for index, profile in enumerate(profiles)}})
+
+    message = ("lathe 'liquid0': an interior medium on an open profile (a single sheet, no inside) whose "
+               "ends meet no other open lathe's: rays that pass its free ends miss the medium; close the "
+               "profile, or close the sheet with other open lathes (a liquid's surface)")
+    assert warn_open_dielectrics(scene("0 0, 1 0.2, 1.2 1")) == [message]
+    assert warn_open_dielectrics(scene("0 0, 1 0.2, 1.2 1", "1.2 1, 0 1")) == []

@@ -113,7 +113,8 @@ def test_caustics_left_to_path_tracing_where_media_do_not_allow(case):
 def test_parameter_errors_name_lathe_volpath():
     with pytest.raises(Exception) as error:
         mi.load_dict({"type": "lathe_volpath", "caustic_paths": -1.0})
-    assert "lathe_volpath: parameter 'caustic_paths' must be > 0 and finite; got -1.0" in str(error.value)
+    assert ("lathe_volpath: parameter 'caustic_paths' must be > 0 and below 1e6 (particles per camera "
+            "sample); got -1.0") in str(error.value)
     with pytest.raises(Exception) as error:
         mi.load_dict({"type": "lathe_volpath", "caustic_max_chain": 0})
     assert "lathe_volpath: parameter 'caustic_max_chain' must be >= 1; got 0" in str(error.value)

@@ -254,6 +254,7 @@ def test_scene_output_renders(tmp_path, capsys):
                      "--scene", str(scene)]) == 0
     text = scene.read_text()
     assert '<scene version="3.0.0">' in text and 'value="lathe_path"' in text
+    assert f"lathe-render {scene} -D spp=64 -D res=512 -->" in text  # (was "{this file}")
     assert text.count('<shape type="lathe"') == 5  # shape1's loop is a shape of its own
     assert 'type="conductor"' in text  # finish { Shiny metallic }
     capsys.readouterr()

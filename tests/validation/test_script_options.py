@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 
@@ -153,3 +154,24 @@ def test_leak_scripts_walk_the_solid_scene_profiles(script, total):
         assert exact[1] == "odd" and exact[2] == "0", totals
     else:
         assert "odd walk    0 odd count    0" in totals[-1], totals
+
+
+
+def test_profile_kernels_accounts_for_the_wall_time(capsys):
+    profile = load_script("profile_kernels.py")
+    assert profile.main(["--resolution", "16x16", "--spp", "1", "--top", "2", "--variant", VARIANT]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    cases = [line for line in lines if not line.startswith(" ")]
+    assert [line.split(":")[0] for line in cases] == ["plain bottle", "caustics bottle"]
+    assert len(lines) == 2 + 2 * 2  # each case and its two most expensive kernels
+    launches = []
+    for line in cases:
+        wall = float(line.split(": ")[1].split(" ms wall")[0])
+        launches.append(int(line.split("wall, ")[1].split(" kernels")[0]))
+        in_kernels = float(line.split("operations), ")[1].split(" ms in kernels")[0])
+        assert 0.0 < in_kernels <= wall  # the kernels run within the case's wall time
+    assert 2 <= launches[0] < launches[1]  # the caustic paths have kernels of their own
+    for bad, message in ((["--resolution", "16x8"], "--resolution must be square (WxW)"),
+                         (["--scene", "nope"], "unknown --scene 'nope'")):
+        with pytest.raises(SystemExit, match=re.escape(message)):
+            profile.main([*bad, "--variant", VARIANT])

@@ -91,6 +91,11 @@ class Interpreter:
         self.rand_streams: list[int] = []
         self.evaluated: set[int] = set()  # id() of lathe/sor keyword tokens read
         self.registry: list = []  # every lathe/sor ObjectNode read, in order
+        #: len(registry) when the directive being run (not one nested in
+        #: another) began: the objects of that statement follow.
+        self.statement_registry = 0
+        self.statement_directive = ""  # ... and its name (#declare, #include, ...)
+        self._directive_depth = 0  # directives being run, nested
         tokens = self.read_file(self.path, None)
         self.frames.append(_Frame(tokens, 0, len(tokens), "file", where=self.path))
 
@@ -120,7 +125,7 @@ class Interpreter:
             raise self.error(f"#include \"{name}\": only files in the scene's folder or POV-Ray's "
                              f"include folders are read", token)
         here = os.path.dirname(os.path.realpath(token.path))
-        folders = [here, self.root, *self.include_path]
+        folders = list(dict.fromkeys([here, self.root, *self.include_path]))
         for folder in folders:
             candidate = os.path.realpath(os.path.join(folder, name))
             allowed = [self.root, *[os.path.realpath(p) for p in self.include_path]]
@@ -276,6 +281,16 @@ class Interpreter:
     # -- directives ----------------------------------------------------------
 
     def _directive(self, token: Token) -> None:
+        if self._directive_depth == 0:
+            self.statement_registry = len(self.registry)
+            self.statement_directive = token.text
+        self._directive_depth += 1
+        try:
+            self._run_directive(token)
+        finally:
+            self._directive_depth -= 1
+
+    def _run_directive(self, token: Token) -> None:
         from . import expressions as ex
 
         d = token.text

@@ -83,13 +83,16 @@ def walk_scene(path: str, include_path: tuple[str, ...] = INCLUDE_PATH,
     instances: list[tuple[ObjectNode, Placement]] = []
     notes = interp.notes
     failed_statements: dict[int, str] = {}
+    resumed_at = None  # where reading went on after the last error whose statement's file had ended
     while True:
         frame = interp.frames[-1] if interp.frames else None
         pos = frame.pos if frame is not None else 0
         state = interp.depth()
         seen = len(interp.registry)
+        peeked = False  # the directives before the statement's first token ran
         try:
             token = interp.peek()
+            peeked, seen = True, len(interp.registry)
             if token.kind == "end":
                 break
             if token.kind == "word" and token.text in OBJECT_KEYWORDS and interp.lookup(token.text) is None:
@@ -103,10 +106,29 @@ def walk_scene(path: str, include_path: tuple[str, ...] = INCLUDE_PATH,
             if not isinstance(e, PovError):
                 e = PovError(f"{interp.last.where}: {type(e).__name__}: {e}")
             notes.append(f"{e}")
-            for node in interp.registry[seen:]:
+            # The objects of the statement that failed (a directive that
+            # failed while the next statement was looked for: its own only)
+            first = seen if peeked else max(seen, interp.statement_registry)
+            for node in interp.registry[first:]:
                 failed_statements[id(node)] = str(e)
             if frame is None or frame not in interp.frames[:state[0]]:
-                break
+                # The file of the last statement ended, and a directive of
+                # the file that included it failed (a missing #include): go
+                # on after it, where the reader is
+                here = (id(interp.frames[-1]), interp.frames[-1].pos) if interp.frames else None
+                if here is None or here == resumed_at:
+                    break
+                resumed_at = here
+                continue  # (the tokens read ahead, in pushback, come next)
+            if not peeked and interp.statement_directive == "#include":
+                # An #include that failed was read to its end, its name
+                # (and the token after it, read ahead): the next statement
+                # follows. Skipping "its statement" from there dropped the
+                # object after a missing include.
+                ahead = list(interp.pushback)
+                interp.unwind(state)
+                interp.pushback.extend(ahead)
+                continue
             interp.unwind(state)
             _top_level_skip(interp, frame, pos)
     main_files = [f for f in interp.files if not any(
