@@ -69,7 +69,8 @@ from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
 __all__ = ["Surface", "CurveSurface", "PolylineSurface", "BSplineSurface", "SorSurface", "Kind", "KINDS",
-           "SURFACE_KINDS", "cli_kind_names", "get_kind", "kind_of", "make_surface", "register_kind",
+           "SURFACE_KINDS", "cli_kind_names", "get_kind", "kind_of", "make_surface", "refuse_sharp_flags",
+           "register_kind",
            "unregister_kind"]
 
 
@@ -307,8 +308,9 @@ def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth,
     return PolylineSurface(profile, smooth)
 
 
-def _no_sharp(kind: str, sharp: np.ndarray, labels) -> None:
-    """The curve kinds are smooth: no sharp flags."""
+def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels) -> None:
+    """The curve kinds are smooth: a sharp flag is an error naming its
+    point (``labels``)."""
     if np.any(sharp):
         k = int(np.argmax(sharp))
         raise ProfileError(
@@ -317,7 +319,7 @@ def _no_sharp(kind: str, sharp: np.ndarray, labels) -> None:
 
 
 def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    _no_sharp(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels)
     if open_sheet:
         raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
                            f"'catmull_rom' for an open sheet")
@@ -326,12 +328,12 @@ def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, 
 
 def _cubic_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
     """Bezier, Catmull-Rom and quadratic profiles (converted to B-spline cubics)."""
-    _no_sharp(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels)
     return BSplineSurface(make_cubic_profile(kind, points, source, open_sheet))
 
 
 def _sor_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    _no_sharp(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels)
     return SorSurface(make_sor_profile(points, source, open_sheet))
 
 

@@ -566,13 +566,16 @@ def load_profile_spec(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, 
 
     Returns ``(points, sharp, labels)`` like
     :func:`lathe_shape.profiles.sources.read_profile_csv`; labels name the file and the
-    point (``"glass.json, point 12"``). Raises
+    point, counted along the spec's walk from its start (``"glass.json, point 12"``;
+    the points themselves come clockwise, the walk reversed). Raises
     :class:`~lathe_shape.profiles.errors.ProfileError` with a message starting with
     the file path and naming the bad key.
     """
     path = os.fspath(path)
     points, sharp = build_from_spec(read_profile_spec(path), source=path)
-    labels = PointLabels.counting(path, len(points))
+    # The points come clockwise, the spec's walk reversed: labels count
+    # along the walk (its start is point 1), as its author counts them
+    labels = PointLabels(path, np.arange(len(points), 0, -1))
     return points, sharp, labels
 
 

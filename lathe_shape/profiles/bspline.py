@@ -533,9 +533,11 @@ def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") ->
         small and nearly constant), blended with 10% arc length so straight
         stretches still get points.
 
-    Returns an (n_points, 2) array of ``(r, z)`` points on the curve. A
-    closed curve gives a closed polyline (last point == first point); an
-    end on the axis stays exactly on it (r = 0).
+    Returns an (n_points, 2) array of ``(r, z)`` points on the curve (fewer
+    where points would lie within 1e-9 of the curve's size of the one
+    before: where the curve's speed vanishes, at an open B-spline's tripled
+    end control points). A closed curve gives a closed polyline (last point
+    == first point); an end on the axis stays exactly on it (r = 0).
     """
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
     return resample_curve(lambda T: _eval_global(seg_ctrl, T), len(seg_ctrl),
@@ -580,7 +582,25 @@ def resample_curve(eval_global, n_seg: int, closed: bool, scale: float, n_points
     else:  # ends on the axis stay exactly there (an open sheet's need not be)
         near_axis = np.abs(pts[[0, -1], 0]) <= 1e-12 * scale
         pts[[0, -1], 0] = np.where(near_axis, 0.0, pts[[0, -1], 0])
-    return pts
+    return _without_tiny_steps(pts, 1e-9 * scale)
+
+
+def _without_tiny_steps(pts: np.ndarray, tol: float) -> np.ndarray:
+    """``pts`` less the points within ``tol`` of the point kept before them
+    (the ends stay): where the curve's speed vanishes (an open B-spline's
+    tripled end control points), a fine uniform sampling puts points
+    closer than a polyline's touch tolerance, which the polyline refused
+    as too short a segment."""
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    if np.all(step > tol):
+        return pts
+    keep = [0]
+    for k in range(1, len(pts)):
+        if np.hypot(*(pts[k] - pts[keep[-1]])) > tol:
+            keep.append(k)
+    if keep[-1] != len(pts) - 1:
+        keep[-1] = len(pts) - 1  # (the end replaces the point kept within tol of it)
+    return pts[keep]
 
 
 def _eval_global(seg_ctrl: np.ndarray, T: np.ndarray) -> np.ndarray:

@@ -259,8 +259,8 @@ def _closed_chain(pts: np.ndarray, flags: np.ndarray, source: str) -> tuple[np.n
         )
     if not closed_loop and not (pts[0, 0] == 0.0 and pts[-1, 0] == 0.0):
         raise ProfileError(
-            f"{source}: profile is not closed: the last point ({_fmt(pts[-1])}) must "
-            f"equal the first ({_fmt(pts[0])}), or both must lie on the axis (r = 0)"
+            f"{source}: profile is not closed: its ends ({_fmt(pts[0])}) and ({_fmt(pts[-1])}) "
+            f"must be the same point, or both must lie on the axis (r = 0)"
         )
     return pts, flags, closed_loop
 

@@ -151,7 +151,7 @@ def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
 
 
 #: ``# key: value`` declarations of a profile CSV (see the module docstring).
-_OPTION = re.compile(r"#\s*(kind|open)\s*:\s*(\S+)\s*$", re.IGNORECASE)
+_OPTION = re.compile(r"#\s*(kind|open)\s*:\s*([^\s#]+)\s*(?:#.*)?$", re.IGNORECASE)
 
 
 def read_profile_options(path: str | os.PathLike, kinds: Iterable[str] | None = None) -> dict:
@@ -164,6 +164,7 @@ def read_profile_options(path: str | os.PathLike, kinds: Iterable[str] | None = 
     if path.lower().endswith(SPEC_SUFFIXES):
         return {}
     options: dict = {}
+    declared: dict[str, int] = {}  # key: line of its declaration
     try:
         with open(path, "rb") as f:
             for number, raw in _numbered_lines(f):
@@ -174,6 +175,10 @@ def read_profile_options(path: str | os.PathLike, kinds: Iterable[str] | None = 
                 if match is None:
                     continue
                 key, value = match.group(1).lower(), match.group(2)
+                if key in declared:
+                    raise ProfileError(f"{path}, line {number}: a second '# {key}:' declaration (the "
+                                       f"first is on line {declared[key]}): give it once")
+                declared[key] = number
                 if key == "open":
                     if value.lower() not in ("true", "false"):
                         raise ProfileError(f"{path}, line {number}: 'open' must be true or false, "
@@ -280,8 +285,11 @@ def _csv_fields(content: str) -> list[str]:
 
 
 def _is_header(fields: list[str]) -> bool:
-    names = [f.lower() for f in fields]
-    return names[:2] == ["r", "z"] and (len(names) == 2 or names[2:] == ["sharp"])
+    """A header row: 2 or 3 column names (``r,z,sharp``, ``x,y``,
+    ``"radius","height"``: any words, quoted or not), no number among
+    them."""
+    names = [f.strip().strip('"').strip("'").strip() for f in fields]
+    return 2 <= len(names) <= 3 and all(names) and not any(_NUMBER.fullmatch(n) for n in names)
 
 
 #: A plain decimal or scientific number, or the words inf, infinity, nan

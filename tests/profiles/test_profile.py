@@ -61,7 +61,8 @@ def test_closed_loop_forms():
         ("0 0, -0.5 1, 0 2", "point 2: negative radius r = -0.5 (r must be >= 0)"),
         ("0 0, 1 0, 1 0, 1 1, 0 1", "point 3: repeats the previous point (1, 0): zero-length segment"),
         ("0 0, 1 0, 1 1, 0.5 1",
-         "profile is not closed: the last point (0.5, 1) must equal the first (0, 0)"),
+         "profile is not closed: its ends (0, 0) and (0.5, 1) must be the same point, or both must lie "
+         "on the axis (r = 0)"),
         ("0 0, 1 0, 0 1, 1 1, 0 2", "profile intersects itself"),
         ("0 0, 1 1, 2 2, 0 0", "profile encloses no area"),
         ("0 0, 1 x, 0 1", "point 2: 'x' is not a number"),
