@@ -50,6 +50,7 @@ from .common import (
     check_at_least,
     command_parser,
     is_interrupt,
+    parse_defines,
     run_command,
 )
 
@@ -199,6 +200,9 @@ class Job:
     #: The frames' denoiser (None without --denoise) and what to tell about it.
     denoiser: Denoiser | None = None
     notes: tuple[str, ...] = ()
+    #: Digest of the scene file and its lathes' profile files
+    #: (:func:`~lathe_shape.tools.frames.inputs_digest`).
+    inputs: str = ""
 
     def metadata(self, frame: Frame) -> dict[str, object]:
         """The EXR header of ``frame`` (without its render time)."""
@@ -216,6 +220,10 @@ class Job:
             "sampler": str(self.turntable.sensor.sampler()).split("[", 1)[0],
             "variant": self.args.variant,
             "scene": os.path.abspath(self.args.scene),
+            # (-D values and the files' contents: frames of another look are another job's)
+            "defines": "; ".join(f"{k}={v}" for k, v in sorted(parse_defines(self.args.defines).items()))
+            or "none",
+            "inputs": self.inputs,
         }
 
 
@@ -223,6 +231,7 @@ def open_job(args: argparse.Namespace) -> Job:
     """Check the options, load and pose the scene, create the output folder
     (last: a failed job leaves nothing behind)."""
     from ..tools.denoise import Denoiser, choose_backend, rendered_spp
+    from ..tools.frames import inputs_digest
     from ..tools.scenes import integrator_name
     from ..tools.turntable import Turntable
     from ..tools.video import require_video
@@ -271,8 +280,11 @@ def open_job(args: argparse.Namespace) -> Job:
     denoiser = None
     if backend:
         denoiser = Denoiser(backend, to_sensor=sensor.world_transform().inverse())
+    from ..plugin.shape import scene_lathes  # (the variant is set: the scene is loaded)
+
+    profiles = [str(lathe.profile.source) for lathe in scene_lathes(scene)]
     return Job(args, turntable, indices, out_dir, spp, size, integrator_name(turntable.integrator),
-               denoiser, notes)
+               denoiser, notes, inputs_digest(args.scene, profiles))
 
 
 def scene_edit(args: argparse.Namespace) -> Callable[[str, str], str] | None:
@@ -352,7 +364,8 @@ def pending_frames(job: Job, frames: FramePlan) -> array:
     skipped = len(frames) - len(todo)
     notes = [f"{skipped} finished frame(s) skipped"] if skipped else []
     if stale:
-        notes.append(f"{stale} frame(s) of a different job (count, spp, seed, ...) rendered again")
+        notes.append(f"{stale} frame(s) of a different job (count, spp, seed, -D values, scene or "
+                     f"profile files, ...) rendered again")
         # The animations in the folder show that job's frames: gone, unless
         # this run writes them anew
         for fmt in VIDEOS:

@@ -30,6 +30,7 @@ from .images import read_exr, write_images
 __all__ = [
     "JOB_KEYS",
     "Frame",
+    "inputs_digest",
     "FramePlan",
     "frame_angle",
     "frame_pngs",
@@ -40,8 +41,25 @@ __all__ = [
     "write_frame",
 ]
 
-#: Header attributes a finished frame must match to be skipped on resume.
-JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator", "denoiser", "sampler")
+#: Header attributes a finished frame must match to be skipped on resume
+#: (``defines``: the -D values; ``inputs``: :func:`inputs_digest`).
+JOB_KEYS = ("count", "angle_deg", "mode", "object", "spp", "seed", "integrator", "denoiser", "sampler",
+            "variant", "defines", "inputs")
+
+
+def inputs_digest(scene_path: str, profile_files: list[str]) -> str:
+    """A digest (16 hex digits of SHA-256) of the scene file's bytes and of
+    its lathes' profile files (``profile_files``, those that exist): an
+    edited scene or profile makes the frames another job's."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for path in [scene_path, *sorted(set(profile_files))]:
+        if os.path.isfile(path):
+            digest.update(os.path.abspath(path).encode() + b"\0")
+            with open(path, "rb") as f:
+                digest.update(hashlib.sha256(f.read()).digest())
+    return digest.hexdigest()[:16]
 
 
 @dataclass(frozen=True)

@@ -222,6 +222,30 @@ def test_resume_skips_finished_frames(tmp_path, capsys):
     assert code == 0 and "rendered 2 frame(s), skipped 0" in stdout
 
 
+def test_resume_renders_again_after_a_change_of_look(tmp_path, capsys):
+    """A -D value, the variant or an edited scene or profile file made no
+    other job: a user adjusting the look with -D and running again got the
+    old frames, called finished."""
+    import shutil
+
+    shutil.copy(SCENES / "wine_glass.xml", tmp_path / "glass.xml")
+    shutil.copy(SCENES / "wine_glass.csv", tmp_path / "wine_glass.csv")
+    scene, out = str(tmp_path / "glass.xml"), str(tmp_path / "turn")
+    job = [scene, "-o", out, "--count", "2", "--frames", "0", *FAST]
+    assert run(capsys, *job)[0] == 0
+    code, stdout, _ = run(capsys, *job)
+    assert code == 0 and "rendered 0 frame(s), skipped 1" in stdout
+    code, stdout, _ = run(capsys, *job, "-D", "mesh_segments=24")  # (the later -D wins)
+    assert code == 0 and "1 frame(s) of a different job" in stdout and "rendered 1 frame(s)" in stdout
+    assert read_exr(os.path.join(out, "frame_0000.exr"))[1]["defines"] == "max_depth=4; mesh_segments=24"
+    profile = tmp_path / "wine_glass.csv"
+    text = profile.read_text()
+    assert "\n0.000000," in text
+    profile.write_text(text.replace("\n0.000000,", "\n0.0,", 1))  # (the same points, other bytes)
+    code, stdout, _ = run(capsys, *job, "-D", "mesh_segments=24")
+    assert code == 0 and "1 frame(s) of a different job" in stdout
+
+
 def check_shards(tmp_path, capsys, name: str, job: list[str]) -> tuple[str, str]:
     single, sharded = tmp_path / f"{name}_single", tmp_path / f"{name}_sharded"
     assert run(capsys, *job, "-o", str(single))[0] == 0
