@@ -157,13 +157,14 @@ def _sensor_to_world_key(params: mi.SceneParameters, sensor: mi.Sensor) -> str |
 def _guide_integrator(integrator: mi.Integrator) -> mi.Integrator:
     """An integrator rendering ``integrator``'s image plus albedo and normal
     guides: ``lathe_path`` and ``lathe_volpath`` render them themselves
-    (their ``aovs``, on the exact lathes); any other integrator is wrapped in
-    Mitsuba's ``aov`` integrator (first-hit guides, on the lathes' reference
-    meshes)."""
+    (their ``aovs``, on the exact lathes; RGB variants); any other
+    integrator, and those in other variants (their ``aovs`` are RGB), is
+    wrapped in Mitsuba's ``aov`` integrator (first-hit guides, on the
+    lathes' reference meshes)."""
     from ..plugin.lathe_path import LathePathIntegrator
     from ..plugin.lathe_volpath import LatheVolpathIntegrator
 
-    if isinstance(integrator, (LathePathIntegrator, LatheVolpathIntegrator)):
+    if isinstance(integrator, (LathePathIntegrator, LatheVolpathIntegrator)) and mi.is_rgb:
         integrator.aovs = ("albedo", "nn")
         return integrator
     return mi.load_dict({"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integrator})

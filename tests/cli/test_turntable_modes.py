@@ -297,3 +297,21 @@ def test_set_to_world_needs_the_scene():
     with pytest.raises(ValueError, match=r"lathe 'lamp': set_to_world: the lathe emits light"):
         lamp.set_to_world(np.eye(4), exact_only=True)
     glass.set_to_world(np.eye(4), exact_only=True)  # (lathe_path's fast path: no mesh rebuild)
+
+
+@pytest.mark.denoise
+@pytest.mark.skipif(not VARIANT.startswith("llvm") or "llvm_ad_spectral" not in mi.variants(),
+                    reason="needs the llvm_ad_spectral variant")
+def test_denoise_with_lathe_path_in_a_spectral_variant(tmp_path):
+    """lathe_path's own guides are RGB: in a spectral variant --denoise
+    failed inside the render ("mitsuba.Spectrum does not have a 'x'
+    component"); it takes Mitsuba's aov guides there, as stock path does."""
+    import subprocess
+
+    result = subprocess.run(
+        [sys.executable, "-m", "lathe_shape.cli.turntable", str(SCENES / "crystal_fire.xml"), "-o",
+         str(tmp_path / "turn"), "--count", "2", "--frames", "0", "--spp", "1", "--resolution", "16",
+         "--variant", "llvm_ad_spectral", "--denoise", "-D", "integrator=lathe_path"],
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "rendered 1 frame(s)" in result.stdout and (tmp_path / "turn" / "frame_0000.exr").is_file()
