@@ -24,6 +24,7 @@ import argparse
 import csv
 import io
 import os
+import re
 import sys
 import time
 
@@ -157,11 +158,30 @@ def _check(args: argparse.Namespace, renders: list[tuple[dict[str, str], str | N
     check_at_least("--threads", args.threads, 1)
     values, profile = renders[0]
     from ..distributed import _profile_edit
+    from ..tools.scenes import SceneError
 
-    scene = open_scene(args.scene, _client_variant(args), [f"{k}={v}" for k, v in values.items()],
-                       args.resolution, edit=None if profile is None else _profile_edit(profile))
+    def load(values: dict[str, str], profile: str | None):
+        return open_scene(args.scene, _client_variant(args), [f"{k}={v}" for k, v in values.items()],
+                          args.resolution, edit=None if profile is None else _profile_edit(profile))
+
+    scene = load(values, profile)
     width, height, spp = check_sensor(scene, args.scene, args.spp)
     check_render_budget(width, height, spp)
+    # Every other value of each key, and every profile, once (with the
+    # first render's other values): a value the scene cannot take is an
+    # error before anything is rendered or written
+    tried = {(key, value) for key, value in values.items()} | {("--profile", profile)}
+    for other, other_profile in renders[1:]:
+        for key, value in [*other.items(), ("--profile", other_profile)]:
+            if (key, value) in tried:
+                continue
+            tried.add((key, value))
+            trial = {**values, key: value} if key != "--profile" else values
+            try:
+                load(trial, other_profile if key == "--profile" else profile)
+            except (SceneError, CliError) as e:
+                what = f"--profile {value}" if key == "--profile" else f"-D {key}={value}"
+                raise CliError(f"{what}: {e}") from None
 
 
 def _client_variant(args: argparse.Namespace) -> str:
@@ -203,17 +223,14 @@ def _index_text(renders: list[tuple[dict[str, str], str | None]], done: dict[int
     return out.getvalue()
 
 
+#: A render's file in the output folder.
+_RENDER_FILE = re.compile(r"sweep_\d+\.exr")
+
+
 def sweep(args: argparse.Namespace) -> int:
-    from ..distributed import (
-        ClusterError,
-        cluster_client,
-        iter_renders,
-        local_worker_pids,
-        stop_local_workers,
-        variation_spec,
-    )
-    from ..tools.images import atomic_path
+    from ..distributed import variation_spec
     from .common import output_folder
+    from .folder_lock import FolderLock
 
     check_cluster_options(args)
     renders = _renders(args)
@@ -228,6 +245,25 @@ def sweep(args: argparse.Namespace) -> int:
     where = ("in this process" if not uses_cluster(args) else
              f"on the Dask cluster at {args.scheduler}" if args.scheduler else
              f"on a local Dask cluster of {args.workers} worker process(es)")
+    with FolderLock(out_dir, {"sweep run": os.getpid()}, range(len(renders)), PROG):
+        return _sweep_into(args, renders, specs, out_dir, names, where)
+
+
+def _sweep_into(args: argparse.Namespace, renders: list, specs: list, out_dir: str, names: list[str],
+                where: str) -> int:
+    """The sweep's renders into ``out_dir``, whose lock this run holds."""
+    from ..distributed import (
+        ClusterError,
+        cluster_client,
+        iter_renders,
+        local_worker_pids,
+        stop_local_workers,
+    )
+    from ..tools.images import atomic_path
+
+    # An earlier sweep's index would describe files this one overwrites
+    if os.path.exists(os.path.join(out_dir, INDEX)):
+        os.remove(os.path.join(out_dir, INDEX))
     print(f"{PROG}: {args.scene} -> {out_dir}{os.sep}\n  {len(renders)} render(s) {where}", flush=True)
     progress = _RenderBar(len(renders))
     done: dict[int, object] = {}
@@ -259,6 +295,12 @@ def sweep(args: argparse.Namespace) -> int:
                     progress.advance(render.seconds)
             with atomic_path(os.path.join(out_dir, INDEX)) as tmp, open(tmp, "w", encoding="utf-8") as f:
                 f.write(_index_text(renders, done, names))
+            stale = sorted(name for name in os.listdir(out_dir) if _RENDER_FILE.fullmatch(name)
+                           and name[:-4] not in set(names))
+            for name in stale:  # (an earlier, longer sweep's: not in the index)
+                os.remove(os.path.join(out_dir, name))
+            if stale:
+                print(f"  removed {len(stale)} render(s) of an earlier sweep ({stale[0]} ...)", flush=True)
     except ClusterError as e:
         progress.close()
         raise CliError(str(e)) from None

@@ -256,3 +256,24 @@ def test_sweep_values_with_commas(tmp_path, capsys):
     red_absorbing = read_exr(out / "sweep_0001.exr")[0][..., :3].mean(axis=(0, 1))
     assert np.ptp(grey) < 1e-6 * grey.mean(), grey
     assert red_absorbing[0] < 0.99 * red_absorbing[1], red_absorbing
+
+
+def test_sweep_checks_every_value_first_and_keeps_its_folder_consistent(tmp_path, capsys):
+    """A value the scene cannot take was found only when its turn came
+    (after the renders before it were written, and retried); a shorter
+    sweep left the longer one's renders, unlisted; a failed one left the
+    earlier index, describing files it had overwritten."""
+    out = tmp_path / "sweep"
+    options = ["--variant", VARIANT, WINE, "-o", str(out), "--spp", "1", "--resolution", "8"]
+    assert sweep.main([*options, "-D", "max_depth=2,3,4"]) == 0
+    capsys.readouterr()
+    assert sweep.main([*options, "-D", "max_depth=2,abc"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lathe-sweep: error: -D max_depth=abc: ")
+    assert 'could not parse integer value "abc"' in err
+    assert sorted(os.listdir(out)) == ["sweep.csv", *(f"sweep_{k:04d}.exr" for k in range(3))]  # untouched
+    assert sweep.main([*options, "-D", "max_depth=5"]) == 0
+    assert "removed 2 render(s) of an earlier sweep (sweep_0001.exr ...)" in capsys.readouterr().out
+    assert sorted(os.listdir(out)) == ["sweep.csv", "sweep_0000.exr"]
+    with open(out / "sweep.csv", newline="") as f:
+        assert [row["max_depth"] for row in csv.DictReader(f)] == ["5"]
