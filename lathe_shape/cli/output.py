@@ -4,6 +4,7 @@ progress bar."""
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 import threading
@@ -39,7 +40,10 @@ def output_folder(path: str | os.PathLike) -> str:
             finally:
                 remove_probe()
     except OSError as e:
-        raise CliError(f"cannot write to output folder '{path}' ({e.strerror or e})") from None
+        # (a folder that exists but takes no files, such as /proc, answers "no such file")
+        why = "files cannot be created in it" if e.errno == errno.ENOENT and os.path.isdir(path) else \
+            (e.strerror or str(e))
+        raise CliError(f"cannot write to output folder '{path}' ({why})") from None
     return path
 
 
@@ -55,7 +59,13 @@ def write_staged(folder: str, writes: list[tuple[Callable[[str], list[str]], str
         for write, name in writes:
             for path in write(staging.stage(name)):
                 names.append(os.path.basename(path))
-        return staging.commit(names)
+        try:
+            return staging.commit(names)
+        except OSError as e:  # (a folder of an output's name, say): name the output, not the staging
+            target = e.filename2 or e.filename or folder
+            if str(target).startswith(os.path.join(folder, ".lathe-")):
+                target = os.path.join(folder, os.path.basename(str(target)))
+            raise CliError(f"cannot write '{target}' ({e.strerror})") from None
 
 
 def format_duration(seconds: float) -> str:

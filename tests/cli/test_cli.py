@@ -278,3 +278,25 @@ def test_scene_file_errors(tmp_path, capsys):
         locked.write_text(NO_INTEGRATOR)
         locked.chmod(0)
         assert f"cannot read scene file '{locked}' (Permission denied)" in error(locked)
+
+
+def test_output_errors_name_the_output(tmp_path, capsys):
+    """A folder in the way of an output file gave Python's error with the
+    hidden staging path; /proc, which takes no files, said 'No such file
+    or directory'."""
+    from lathe_shape.cli import render
+
+    out = tmp_path / "out"
+    (out / "wine_glass.exr").mkdir(parents=True)
+    code = render.main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", str(out), "--spp", "1",
+                        "--resolution", "8"])
+    assert code == 2
+    assert capsys.readouterr().err == (
+        f"lathe-render: error: cannot write '{out / 'wine_glass.exr'}' (Is a directory)\n")
+    assert sorted(os.listdir(out)) == ["wine_glass.exr"]  # (no staging folder left)
+    if os.path.isdir("/proc/self"):
+        code = render.main(["--variant", VARIANT, str(SCENES / "wine_glass.xml"), "-o", "/proc", "--spp", "1",
+                            "--resolution", "8"])
+        assert code == 2
+        assert capsys.readouterr().err == (
+            "lathe-render: error: cannot write to output folder '/proc' (files cannot be created in it)\n")
