@@ -165,7 +165,7 @@ def make_profile(
     _check_short_segments(pts, labels, closed_loop, tol)
     if _collinear(pts, tol):
         raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
-    _check_simple(pts, labels, source, tol)
+    _check_simple(pts, labels, source, tol, closed_loop)
     area = _signed_area(pts)
     if abs(area) <= tol * _extent(pts):
         raise ProfileError(f"{source}: profile encloses no area (all points collinear?)")
@@ -351,10 +351,14 @@ def _collinear(pts: np.ndarray, tol: float) -> bool:
     return length == 0.0 or bool(np.all(np.abs(cross) <= tol * length))
 
 
-def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: float) -> None:
+def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: float,
+                  closed_loop: bool = True) -> None:
     """Raise if the closed polygon folds back at a vertex (an edge runs back
-    over the previous one) or if two non-adjacent edges come within ``tol``
-    of each other (:func:`.crossings.first_crossing`)."""
+    over the previous one), if a chain with both ends on the axis
+    (``closed_loop`` False) touches the axis between them, or if two
+    non-adjacent edges come within ``tol`` of each other
+    (:func:`.crossings.first_crossing`). Errors name the points by their
+    ``labels`` (file and line) and give them in full precision."""
     e_in = pts - np.roll(pts, 1, axis=0)  # edge into vertex k
     e_out = np.roll(pts, -1, axis=0) - pts  # edge out of vertex k
     cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
@@ -366,6 +370,14 @@ def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: floa
         raise ProfileError(
             f"{labels[k]}: profile intersects itself: it folds back at ({_fmt(pts[k])})"
         )
+    if not closed_loop:
+        on_axis = np.flatnonzero(pts[1:-1, 0] <= tol) + 1
+        if len(on_axis):
+            k = int(on_axis[0])
+            raise ProfileError(
+                f"{labels[k]}: the profile touches the axis at ({_fmt(pts[k])}) between its ends: a "
+                f"profile meets the axis (r = 0) only at its first and last point; split it into two "
+                f"lathes, or move the point off the axis")
     pair = first_crossing(pts, closed=True, tol=tol)
     if pair is None:
         return
@@ -373,13 +385,20 @@ def _check_simple(pts: np.ndarray, labels: Sequence[str], source: str, tol: floa
 
     def edge_name(e: int) -> str:
         a, b = pts[e], pts[(e + 1) % n]
+        ends = f"({_fmt_exact(a)}) -> ({_fmt_exact(b)})"
         if e == n - 1:
-            return f"closing segment ({_fmt(a)}) -> ({_fmt(b)})"
-        return f"segment ({_fmt(a)}) -> ({_fmt(b)})"
+            return f"the closing segment {ends}" + (" (along the axis)" if not closed_loop else "")
+        return f"the segment {ends} from {_where(labels[e])} to {_where(labels[e + 1])}"
 
     raise ProfileError(
         f"{source}: profile intersects itself: {edge_name(pair[0])} meets {edge_name(pair[1])}"
     )
+
+
+def _where(label: str) -> str:
+    """``"line 5"`` of a label ``"file.csv, line 5"`` (the message names the
+    file once)."""
+    return label.rsplit(", ", 1)[-1]
 
 
 def _surface_segments(pts: np.ndarray, closed_loop: bool) -> np.ndarray:

@@ -63,7 +63,12 @@ def test_closed_loop_forms():
         ("0 0, 1 0, 1 1, 0.5 1",
          "profile is not closed: its ends (0, 0) and (0.5, 1) must be the same point, or both must lie "
          "on the axis (r = 0)"),
-        ("0 0, 1 0, 0 1, 1 1, 0 2", "profile intersects itself"),
+        ("0 0, 1 0, 1 2, 0.5 1, 1.5 1, 0 2",
+         "profile intersects itself: the segment (1.0, 0.0) -> (1.0, 2.0) from point 2 to point 3 meets the "
+         "segment (0.5, 1.0) -> (1.5, 1.0) from point 4 to point 5"),
+        ("0 0, 1 0, 0 1, 1 1, 0 2",
+         "point 3: the profile touches the axis at (0, 1) between its ends: a profile meets the axis (r = 0) "
+         "only at its first and last point"),
         ("0 0, 1 1, 2 2, 0 0", "profile encloses no area"),
         ("0 0, 1 x, 0 1", "point 2: 'x' is not a number"),
         ("0 0, 1, 0 1", "point 2: expected 'r z' or 'r z sharp', got '1'"),

@@ -101,12 +101,21 @@ def test_large_bspline_loads_fast():
 
 
 def test_crossing_pair_named():
-    """The lowest crossing pair is named: the second edge ends on the axis
-    segment that closes the profile."""
+    """The lowest crossing pair is named, with the points' labels (file and
+    line: '1, 0.999984' of a 100,000-point file could not be found) in full
+    precision; a profile that reaches the axis between its ends (which met
+    the axis segment that closes it) is told so."""
+    points, sharp, labels = parse_profile_string("0 0, 1 0, 1 2, 0.5 1, 1.5 1, 0 2")
     with pytest.raises(ProfileError) as info:
-        make_profile(parse_profile_string("0 0, 1 0, 0 1, 1 1, 0 2")[0], source="p")
-    assert str(info.value) == ("p: profile intersects itself: segment (1, 0) -> (0, 1) meets "
-                               "closing segment (0, 2) -> (0, 0)")
+        make_profile(points, sharp, labels, source="p")
+    assert str(info.value) == ("p: profile intersects itself: the segment (1.0, 0.0) -> (1.0, 2.0) from "
+                               "point 2 to point 3 meets the segment (0.5, 1.0) -> (1.5, 1.0) from point 4 "
+                               "to point 5")
+    points, sharp, labels = parse_profile_string("0 0, 1 0, 0 1, 1 1, 0 2")
+    with pytest.raises(ProfileError) as info:
+        make_profile(points, sharp, labels, source="p")
+    assert str(info.value).startswith("parameter 'profile', point 3: the profile touches the axis at (0, 1) "
+                                      "between its ends")
 
 
 # ---------------------------------------------------------------------------
