@@ -63,7 +63,7 @@ from .kernels.polyline import (
 from .kernels.top_level import BSPLINE_LAYOUT, POLYLINE_LAYOUT, KindLayout
 from .profiles import bspline as bs
 from .profiles.bspline import BSplineProfile, make_bspline_profile
-from .profiles.polyline import Profile, ProfileError, make_profile
+from .profiles.polyline import Profile, ProfileError, check_finite_points, make_profile
 from .profiles.sor import SorProfile, make_sor_profile
 from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
@@ -308,9 +308,12 @@ def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth,
     return PolylineSurface(profile, smooth)
 
 
-def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels) -> None:
+def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels, points: np.ndarray | None = None) -> None:
     """The curve kinds are smooth: a sharp flag is an error naming its
-    point (``labels``)."""
+    point (``labels``); with ``points``, a point that is not finite or too
+    large is one too (named by its line, not its control-point number)."""
+    if points is not None and len(points) == len(labels):
+        check_finite_points(points, labels)
     if np.any(sharp):
         k = int(np.argmax(sharp))
         raise ProfileError(
@@ -319,7 +322,7 @@ def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels) -> None:
 
 
 def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    refuse_sharp_flags(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels, points)
     if open_sheet:
         raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
                            f"'catmull_rom' for an open sheet")
@@ -328,12 +331,12 @@ def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, 
 
 def _cubic_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
     """Bezier, Catmull-Rom and quadratic profiles (converted to B-spline cubics)."""
-    refuse_sharp_flags(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels, points)
     return BSplineSurface(make_cubic_profile(kind, points, source, open_sheet))
 
 
 def _sor_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    refuse_sharp_flags(kind, sharp, labels)
+    refuse_sharp_flags(kind, sharp, labels, points)
     return SorSurface(make_sor_profile(points, source, open_sheet))
 
 

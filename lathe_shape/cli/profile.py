@@ -197,7 +197,7 @@ def check_or_convert(args: argparse.Namespace) -> int:
                                 polyline, kind))
         return 0
     if kind == "bspline" and not open_sheet:
-        refuse_sharp_flags(kind, sharp, labels)  # (as the lathe shape does: make_surface)
+        refuse_sharp_flags(kind, sharp, labels, points)  # (as the lathe shape does: make_surface)
         spline = make_bspline_profile(points, args.input)
     else:
         spline = make_surface(kind, points, sharp, labels, args.input, open_sheet=open_sheet).profile

@@ -229,6 +229,19 @@ def _open_profile(pts: np.ndarray, flags: np.ndarray, labels: Sequence[str], sou
 def _check_coordinates(pts: np.ndarray, labels: Sequence[str]) -> None:
     """Every point finite, within :data:`.limits.MAX_COORDINATE`, with a
     radius >= 0."""
+    check_finite_points(pts, labels)
+    negative = pts[:, 0] < 0.0
+    if negative.any():
+        k = int(np.argmax(negative))
+        raise ProfileError(f"{labels[k]}: negative radius r = {pts[k, 0]:g} (r must be >= 0)")
+
+
+def check_finite_points(pts: np.ndarray, labels: Sequence[str]) -> None:
+    """Every point finite and within :data:`.limits.MAX_COORDINATE`;
+    errors name the point by its label (file and line). The curve kinds'
+    control points are checked by this too, before their own validation
+    (which counts control points)."""
+    pts = np.asarray(pts, dtype=np.float64)
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
         k = int(np.argmax(bad))
@@ -238,10 +251,6 @@ def _check_coordinates(pts: np.ndarray, labels: Sequence[str]) -> None:
         k = int(np.argmax(huge))
         raise ProfileError(f"{labels[k]}: coordinate too large ({_fmt(pts[k])}): |r| and |z| "
                            f"must be below {MAX_COORDINATE:g} (their squares must fit in float32)")
-    negative = pts[:, 0] < 0.0
-    if negative.any():
-        k = int(np.argmax(negative))
-        raise ProfileError(f"{labels[k]}: negative radius r = {pts[k, 0]:g} (r must be >= 0)")
 
 
 def _closed_chain(pts: np.ndarray, flags: np.ndarray, source: str) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -48,7 +48,7 @@ def lathe_of(scene: mi.Scene) -> LatheShape:
     "profile, message",
     [
         ("0 0, 1 1", "an open B-spline needs at least 3 control points (both ends on the axis), got 2"),
-        ("0 0, 1 0, nan 1, 0 2", "B-spline control point 3 is not finite: [nan, 1.0]"),
+        ("0 0, 1 0, nan 1, 0 2", "parameter 'profile', point 3: non-finite coordinate (nan, 1)"),
         ("0 0, 1 0, -1 1, 0 2", "B-spline curve crosses the axis (r < 0)"),
         ("0 0, 1 0, 1 1, 0.5 1", "an open B-spline must start and end on the axis (r = 0)"),
     ],

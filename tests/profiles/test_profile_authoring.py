@@ -5,6 +5,7 @@ the checker as by the shape, fine uniform samplings of open B-splines."""
 from __future__ import annotations
 
 import json
+import re
 
 import mitsuba as mi
 import pytest
@@ -79,3 +80,15 @@ def test_fine_uniform_sampling_of_an_open_bspline(tmp_path, capsys):
     profile = make_profile(points, sharp, labels)  # a valid polyline
     assert 99_000 < len(points) <= 100_000 and profile.points[:, 0].min() == 0.0
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("kind", ["bspline", "bezier", "catmull_rom"])
+def test_curve_kind_errors_name_the_line(tmp_path, kind):
+    """'B-spline control point 2 is not finite' made the user count control
+    points; the line is named, as for polylines."""
+    path = tmp_path / "nan.csv"
+    path.write_text(f"# kind: {kind}\n0,0\n1,nan\n1,2\n0,2\n")
+    message = f"{path}, line 3: non-finite coordinate (1, nan)"
+    assert cli.main([str(path)]) == 2
+    with pytest.raises(Exception, match=re.escape(message)):
+        mi.load_dict({"type": "lathe", "filename": str(path)})
