@@ -96,7 +96,10 @@ def describe_polyline(path: str, points, sharp, labels, crease_angle: float,
     r_max, z_min, z_max = polyline.bounds()
     form = ("open sheet" if open_sheet else
             "closed loop" if polyline.closed_loop else "both ends on the axis")
-    creases = int(np.sum(np.any(polyline.normal_end[:-1] != polyline.normal_start[1:], axis=1)))
+    joints = np.any(polyline.normal_end[:-1] != polyline.normal_start[1:], axis=1)
+    # (a closed loop's last segment meets its first: that joint counts too)
+    wrap = polyline.closed_loop and bool(np.any(polyline.normal_end[-1] != polyline.normal_start[0]))
+    creases = int(np.sum(joints)) + wrap
     return (f"{path}: valid {kind} profile, {len(polyline.points)} points, "
             f"{polyline.segment_count} surface segments, {form}, r <= {r_max:g}, "
             f"z in [{z_min:g}, {z_max:g}], {creases} creases at {crease_angle:g} deg")
@@ -105,7 +108,17 @@ def describe_polyline(path: str, points, sharp, labels, crease_angle: float,
 def describe_bspline(path: str, spline) -> str:
     """The one-line summary of a validated curve profile (any kind but
     polyline)."""
-    r_max, z_min, z_max = spline.bounds()
+    import numpy as np
+
+    from ..profiles.bspline import cubic_ranges, power_coefficients
+
+    # The curve's own extent (bounds() gives the control polygon's for a
+    # B-spline, which bounds the curve), round-off at 0 shown as 0
+    coef = power_coefficients(spline.segment_controls)
+    r, z = cubic_ranges(coef[:, 0]), cubic_ranges(coef[:, 1])
+    tiny = 1e-12 * float(np.abs(spline.segment_controls).max())
+    r_max, z_min, z_max = (0.0 if abs(v) <= tiny else v
+                           for v in (float(r[:, 1].max()), float(z[:, 0].min()), float(z[:, 1].max())))
     if spline.kind == "bspline":
         form = "closed periodic" if spline.closed_loop else "solid, ends on the axis"
         what = "cubic B-spline profile"

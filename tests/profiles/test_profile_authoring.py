@@ -92,3 +92,15 @@ def test_curve_kind_errors_name_the_line(tmp_path, kind):
     assert cli.main([str(path)]) == 2
     with pytest.raises(Exception, match=re.escape(message)):
         mi.load_dict({"type": "lathe", "filename": str(path)})
+
+
+def test_summaries_describe_the_curve(tmp_path, capsys):
+    """A closed loop's last joint was left out of its creases (a square
+    torus read 3); a B-spline's r <= was its control polygon's (5.7 for
+    the paper's glass, whose curve reaches 4.79)."""
+    path = tmp_path / "torus.csv"
+    path.write_text("1,0\n2,0\n2,2\n1,2\n1,0\n")
+    assert cli.main([str(path)]) == 0
+    assert capsys.readouterr().out.rstrip().endswith("closed loop, r <= 2, z in [0, 2], 4 creases at 30 deg")
+    assert cli.main([str(ROOT / "scenes" / "paper" / "glass_bspline.csv"), "--kind", "bspline"]) == 0
+    assert "r <= 4.78966, z in [0, 17.1638]" in capsys.readouterr().out
