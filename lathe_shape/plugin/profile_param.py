@@ -102,8 +102,9 @@ class ProfileIndex:
     B-spline controls is a weighted sum of ``width`` user points (eq. 18),
     ``controls`` their indices and ``weights`` their weights (``width`` per
     control, 4 controls per segment); for ``bspline`` ``width`` is 1 and
-    ``weights`` None. ``held``: per user point, whether it lies on the
-    axis, where it stays (its ``r`` has no derivative).
+    ``weights`` None. ``held``: per user point, whether it is a solid's
+    end on the axis, where it stays (its ``r`` has no derivative; see
+    :func:`_held_on_axis`).
     """
 
     ends: mi.UInt32 | None = None
@@ -190,11 +191,26 @@ def _cubic_controls(given: ProfileInput, profile) -> tuple[np.ndarray, np.ndarra
     return indices, weights
 
 
+def _held_on_axis(given: ProfileInput) -> np.ndarray:
+    """Per user point, whether its r is held on the axis: a solid's first
+    and last point when they lie there (a polyline's ends, an open
+    B-spline's or a Bezier curve's, which the curve passes through). The
+    ends of an open sheet are free, and so are the control points of
+    ``catmull_rom`` and ``quadratic`` curves, whose ends are weighted sums
+    of several points (keep those on the axis in the optimiser)."""
+    points = np.asarray(given.points)
+    held = np.zeros(len(points), dtype=bool)
+    if not given.open_sheet and given.kind in ("polyline", "bspline", "bezier"):
+        for k in (0, len(points) - 1):
+            held[k] = points[k, 0] == 0.0
+    return held
+
+
 def profile_index(surface: PolylineSurface | BSplineSurface) -> ProfileIndex:
     """The :class:`ProfileIndex` of a surface built with :func:`remember_input`."""
     given = surface.given
     profile = surface.profile
-    held = mi.Bool(np.asarray(given.points)[:, 0] == 0.0)
+    held = mi.Bool(_held_on_axis(given))
     dr.make_opaque(held)
     if given.kind in CUBIC_KINDS:
         indices, weights = _cubic_controls(given, profile)
