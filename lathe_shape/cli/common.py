@@ -80,7 +80,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..memory import available_memory, format_bytes
-from . import interrupts
+from . import interrupts, output
 
 # The jobs of the former single module, one module each; their names stay
 # importable from here.
@@ -254,12 +254,15 @@ def run_command(prog: str, parser: argparse.ArgumentParser, body: Callable[[argp
             sys.stdout = _ClosedPipeSafe(sys.stdout)
         if sys.stderr is not None and not isinstance(sys.stderr, _ClosedPipeSafe):
             sys.stderr = _ClosedPipeSafe(sys.stderr)
+    created = output.created_folders.copy()
     try:
         status = body(parser.parse_args(argv))
     except SystemExit:
         raise  # argparse: --help, or a usage error already reported
     except BaseException as e:
         status = _report(prog, e)
+    if status != 0:
+        output.remove_empty_created(created)  # (a run that failed leaves no empty output folder)
     # A command run from the command line (``argv`` None) that was
     # interrupted ends here too: a Ctrl-C that lands while Dr.Jit or
     # Mitsuba threads wind down can otherwise abort the interpreter's

@@ -18,11 +18,29 @@ from .errors import CliError
 __all__ = ["ProgressBar", "format_duration", "output_folder", "write_staged"]
 
 
+#: The output folders this process created (see :func:`remove_empty_created`).
+created_folders: set[str] = set()
+
+
+def remove_empty_created(before: set[str]) -> None:
+    """Remove the output folders created since ``before`` (a copy of
+    :data:`created_folders`) that are still empty: a command that failed
+    after making its folder (an unreachable cluster, say) leaves none."""
+    for path in created_folders - before:
+        try:
+            os.rmdir(path)  # (only an empty folder)
+        except OSError:
+            pass
+        created_folders.discard(path)
+
+
 def output_folder(path: str | os.PathLike) -> str:
     """Create the folder ``path`` if missing and check that files can be
     created in it (by creating one: ``os.access`` says yes to root even on a
     read-only mount); returns its absolute path."""
     path = os.path.abspath(os.fspath(path))
+    if not os.path.exists(path):
+        created_folders.add(path)
     if os.path.exists(path) and not os.path.isdir(path):
         raise CliError(f"output folder '{path}' exists and is not a folder")
     probe = os.path.join(path, f".write-test-{os.getpid()}-{threading.get_ident()}")

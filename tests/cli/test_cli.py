@@ -300,3 +300,29 @@ def test_output_errors_name_the_output(tmp_path, capsys):
         assert code == 2
         assert capsys.readouterr().err == (
             "lathe-render: error: cannot write to output folder '/proc' (files cannot be created in it)\n")
+
+
+def test_a_failed_command_leaves_no_empty_output_folder(tmp_path, capsys):
+    """An unreachable Dask scheduler (20 s) failed after the output folder
+    was made, and left it empty; a folder that holds files stays."""
+    import argparse
+
+    from lathe_shape.cli.common import CliError, output_folder, run_command
+
+    def failing(folder):
+        def body(args):
+            output_folder(folder)
+            if "keep" in str(folder):
+                (folder / "frame.exr").write_bytes(b"")
+            raise CliError("cannot reach the Dask scheduler")
+        return body
+
+    for name in ("empty", "keep"):
+        folder = tmp_path / name / "out"
+        assert run_command("lathe-x", argparse.ArgumentParser(), failing(folder), []) == 2
+        assert folder.exists() == (name == "keep")
+    existing = tmp_path / "existing"
+    existing.mkdir()
+    assert run_command("lathe-x", argparse.ArgumentParser(), failing(existing), []) == 2
+    assert existing.is_dir()  # (not made by the command: left alone)
+    assert capsys.readouterr().err.count("lathe-x: error: cannot reach the Dask scheduler") == 3
