@@ -1,7 +1,9 @@
 """lathe_shape: exact rendering of transparent solids of revolution in Mitsuba 3.
 
 Importing the package registers its Mitsuba plugins for the active variant
-(and again on every later ``mi.set_variant``):
+(select it first; one JIT variant per process: after a later
+``mi.set_variant`` to another JIT variant the plugins refuse to load,
+naming the variant they were imported under):
 
 * ``<shape type="lathe">`` -- a solid of revolution; stock integrators render
   its reference tessellation, ``lathe_path`` renders it exactly;

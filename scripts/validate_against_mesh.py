@@ -1,8 +1,8 @@
 """Exact lathe renders against stock `path` on ever finer reference meshes.
 
-For each scene, renders once with `lathe_path` (normal_check none: the same
-estimator and the same random-number use as Mitsuba's `path`, so with one
-seed the two renders are correlated) and with stock `path` on the reference
+For each scene, renders once with `lathe_path` (normal_check none, caustics
+off: the same estimator and the same random-number use as Mitsuba's `path`,
+so with one seed the two renders are correlated) and with stock `path` on the reference
 tessellation at increasing `mesh_segments`, and prints the image error
 (`lathe_shape.tools.images.image_errors`), which must fall toward zero as the
 mesh converges to the exact surface.
@@ -68,7 +68,8 @@ def validate(args: argparse.Namespace) -> int:
             scene = load(name, segments)
             if k == 0:  # the exact surface does not depend on mesh_segments
                 exact_integrator = exact_integrator or mi.load_dict(
-                    {"type": "lathe_path", "max_depth": args.max_depth, "normal_check": "none"})
+                    {"type": "lathe_path", "max_depth": args.max_depth, "normal_check": "none",
+                     "caustics": False})  # (paired samples: see the module docstring)
                 exact = mi.render(scene, spp=args.spp, seed=args.seed, integrator=exact_integrator).numpy()
             mesh_integrator = mi.load_dict({"type": "path", "max_depth": args.max_depth})
             mesh = mi.render(scene, spp=args.spp, seed=args.seed, integrator=mesh_integrator).numpy()

@@ -49,8 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="profile file (CSV r,z[,sharp], or a .json/.toml arc spec)")
     parser.add_argument("--kind", choices=tuple(profile_kinds()), default=None,
                         help="how to read the points (default: the CSV's '# kind:' line, else polyline)")
-    parser.add_argument("--open", action="store_true",
-                        help="the profile is a single open sheet (default: the CSV's '# open:' line)")
+    parser.add_argument("--open", action=argparse.BooleanOptionalAction, default=None,
+                        help="the profile is a single open sheet, or (--no-open) the outline of a solid "
+                             "(default: the CSV's '# open:' line, else a solid)")
     parser.add_argument("--from-pov", metavar="FILE.pov",
                         help="import every lathe and sor object of a POV-Ray scene (its #declare, "
                              "#if, #while, macros, #include and transforms evaluated): writes "
@@ -198,7 +199,7 @@ def check_or_convert(args: argparse.Namespace) -> int:
         name = declared.get("kind", "polyline")
         record = next(k for k in kinds.values() if k.name == name)
     kind = record.name
-    open_sheet = args.open or declared.get("open", False)
+    open_sheet = declared.get("open", False) if args.open is None else args.open
     if record.kernel == "polyline":
         if args.to_polyline is not None:
             raise CliError("--to-polyline needs a curve --kind (the input is already a polyline)")

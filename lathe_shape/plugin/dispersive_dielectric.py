@@ -11,17 +11,19 @@ wavelength dependent.
 wavelengths per path (``si.wavelengths``; the sensor draws them so that
 each one alone is uniformly distributed over the visible range). A
 delta refraction can follow only one direction, so where the index
-varies across the path's wavelengths this BSDF uses the first of them,
-the *hero wavelength*: the choice between reflection and refraction is made
-with the hero's Fresnel reflectance R_0; a reflection keeps every
-wavelength (the reflected direction does not depend on the index), with
-weights R_i / R_0; a refraction follows the hero's direction and
-keeps only the hero, with its weight multiplied by the number of
-wavelengths (4) and the other wavelengths' weights set to zero. Averaged
-over the sensor's random wavelengths this is unbiased (each wavelength is
-the hero as often as any other); later dispersive vertices of the same path
-refract along the same (hero) wavelength. ``bs.eta`` is the hero's relative
-index. With a constant index (``int_ior`` a float without ``abbe``) nothing
+varies across the path's wavelengths this BSDF picks one of them at each
+interface, uniformly at random (from ``sample2``, which a delta BSDF does
+not otherwise use): the *hero wavelength*. The choice between reflection
+and refraction is made with the hero's Fresnel reflectance R_0; a
+reflection keeps every wavelength (the reflected direction does not depend
+on the index), with weights R_i / R_0; a refraction follows the hero's
+direction and keeps only the hero, with its weight multiplied by the
+number of wavelengths (4) and the other wavelengths' weights set to zero.
+Each wavelength is the hero with probability 1/4 at every interface, so
+the estimate is unbiased without state carried along the path; a later
+dispersive refraction that picks a wavelength already dropped ends the
+path's contribution (noise after the first dispersive refraction).
+``bs.eta`` is the hero's relative index. With a constant index (``int_ior`` a float without ``abbe``) nothing
 is dropped. RGB and monochrome variants have no wavelengths: the plugin
 refuses them, naming the spectral variants (``llvm_ad_spectral``,
 ``cuda_ad_spectral``); polarized variants are refused as well.

@@ -129,7 +129,8 @@ def coarsest_agreeing_mesh(scene_at: Callable[[int], mi.Scene], exact_scene: mi.
     """The coarsest ``mesh_segments`` whose stock ``path`` render agrees with
     the exact render within noise on the glass pixels.
 
-    The exact render uses ``lathe_path`` with ``normal_check none``, which
+    The exact render uses ``lathe_path`` with ``normal_check none`` and
+    without ``caustics`` (whose light-traced paths are drawn apart), which
     draws random numbers as ``path`` does, so with the same seed the two
     renders differ by the geometry, not by noise. The noise is the error
     between two exact renders of different seeds. Returns (segments, its
@@ -139,7 +140,8 @@ def coarsest_agreeing_mesh(scene_at: Callable[[int], mi.Scene], exact_scene: mi.
     from ..tools.images import relative_error
     from .furnace import glass_mask
 
-    exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "normal_check": "none"})
+    exact_integrator = mi.load_dict({"type": "lathe_path", "max_depth": max_depth, "normal_check": "none",
+                                     "caustics": False})
     mesh_integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
     mask = glass_mask(exact_scene)
     exact = mi.render(exact_scene, spp=spp, seed=seed, integrator=exact_integrator).numpy()

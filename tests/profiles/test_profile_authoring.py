@@ -104,3 +104,12 @@ def test_summaries_describe_the_curve(tmp_path, capsys):
     assert capsys.readouterr().out.rstrip().endswith("closed loop, r <= 2, z in [0, 2], 4 creases at 30 deg")
     assert cli.main([str(ROOT / "scenes" / "paper" / "glass_bspline.csv"), "--kind", "bspline"]) == 0
     assert "r <= 4.78966, z in [0, 17.1638]" in capsys.readouterr().out
+
+
+def test_no_open_overrides_the_files_open_line(tmp_path, capsys):
+    """--open could only switch an open sheet on: a file declaring
+    '# open: true' could not be checked as a solid."""
+    path = tmp_path / "sheet.csv"
+    path.write_text("# open: true\n0,0\n1,0\n1,1\n0,1\n")
+    assert cli.main([str(path)]) == 0 and "open sheet" in capsys.readouterr().out
+    assert cli.main([str(path), "--no-open"]) == 0 and "both ends on the axis" in capsys.readouterr().out
