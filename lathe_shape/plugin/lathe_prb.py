@@ -245,6 +245,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         self._differentiating = False
         self._seed, self._sensor = 0, None
         self._lobes = (True, True)
+        self._forward_sources: list = []  # (see _forward_tangent)
+        self._forward_lathes: list = []
         self._plain_emitters = False
 
     def prepare_geometry(self, geometry: ExactSceneGeometry) -> None:
@@ -273,8 +275,17 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         if through_glass:
             terms.append(glass_outline_forward(self, scene, camera, seed, self.silhouette_spp,
                                                self.glass_outline_lines))
-        with self._attached_pass_only(seed, camera):
-            image = super().render_forward(scene, params, sensor, seed, spp)
+        # (the parameters other than the lathes' points whose tangents the
+        # interior pass propagates, see _forward_tangent)
+        self._forward_lathes = lathes = self.geometry(scene).lathes
+        self._forward_sources = [] if not isinstance(params, mi.SceneParameters) else [
+            params[key] for key in params.keys()
+            if not any(params.properties[key][2] is lathe for lathe in lathes) or not key.endswith(".points")]
+        try:
+            with self._attached_pass_only(seed, camera):
+                image = super().render_forward(scene, params, sensor, seed, spp)
+        finally:
+            self._forward_sources = []
         for term in terms:
             image += mi.TensorXf(term[..., : image.shape[2]].astype(np.float32))
         return image
@@ -299,10 +310,13 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
 
     def _outline_terms(self, scene: mi.Scene, camera: mi.Sensor) -> tuple[bool, bool]:
         """Whether the outline term and the through-glass outline term
-        apply: asked for, the scene has lathes (and for the second a
-        Dirac-delta BSDF), and the camera maps points to the image."""
-        silhouette = self.silhouette and bool(self.geometry(scene).lathes)
-        through_glass = self.glass_outlines and bool(self.geometry(scene).lathes) and scene_lobes(scene)[0]
+        apply: asked for, a lathe's points are differentiated (the outline
+        terms are their derivative alone: a gradient of BSDF or emitter
+        parameters needs neither), and for the second the scene has a
+        Dirac-delta BSDF; and the camera maps points to the image."""
+        moving = any(dr.grad_enabled(lathe.profile_points) for lathe in self.geometry(scene).lathes)
+        silhouette = self.silhouette and moving
+        through_glass = self.glass_outlines and moving and scene_lobes(scene)[0]
         if (silhouette or through_glass) and camera.class_name() not in OUTLINE_CAMERAS:
             raise ValueError(
                 f"lathe_prb: the outline terms (parameters 'silhouette' and 'glass_outlines') need a "
@@ -455,9 +469,28 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
                 dr.backward_from(dr.gather(mi.Spectrum, δL, lanes) * L)
                 return nothing, alpha, [], nothing
             derivative = dr.zeros(mi.Spectrum, width)
-            dr.scatter(derivative, dr.forward_to(L), lanes)
+            dr.scatter(derivative, self._forward_tangent(L), lanes)
             dr.eval(derivative)  # (a scatter's target: evaluated before another kernel reads it)
             return derivative, alpha, [], nothing
+
+    def _forward_tangent(self, L: mi.Spectrum) -> mi.Spectrum:
+        """The tangent of ``L`` for the tangents set on the render's
+        parameters: propagated forward from them (``dr.forward_to(L)``,
+        which traverses only towards ``L``, refused the edges from a
+        parameter into a BSDF's or emitter's method called as a function,
+        such as a diffuse reflectance's: "tried to forward-propagate
+        derivatives across edge ... outside of the current
+        dr.isolate_grad() scope")."""
+        sources = [value for value in self._forward_sources if dr.grad_enabled(value)]
+        if not sources:
+            return dr.forward_to(L)  # (the lathes' points alone: read outside any such method)
+        points = [lathe.profile_points for lathe in self._forward_lathes]
+        dr.enqueue(dr.ADMode.Forward, *sources, *(value for value in points if dr.grad_enabled(value)))
+        # (the sources' tangents consumed, as forward_to does; interior ones kept: L's is read)
+        dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges | dr.ADFlag.ClearInput)
+        tangent = dr.grad(L)
+        dr.eval(tangent)
+        return mi.Spectrum(tangent)
 
     @staticmethod
     def _compact(path: _Path, index: mi.UInt32, sampler, L: mi.Spectrum, going: int):

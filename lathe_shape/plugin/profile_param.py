@@ -66,6 +66,14 @@ def remember_input(surface: PolylineSurface | BSplineSurface, points, sharp, lab
     return surface
 
 
+def _repeats_first_point(given: ProfileInput) -> bool:
+    """Whether a solid polyline or B-spline profile was given in the
+    closed form whose last point repeats the first."""
+    points = np.asarray(given.points)
+    return (given.kind in ("polyline", "bspline") and not given.open_sheet and len(points) > 3
+            and bool(np.all(points[0] == points[-1])))
+
+
 def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray,
                     who: str = "lathe: parameter 'points'") -> PolylineSurface | BSplineSurface:
     """Validate new point coordinates (flat ``r, z`` pairs, the user's order)
@@ -79,6 +87,13 @@ def rebuild_surface(given: ProfileInput, values: mi.Float | np.ndarray,
             f"({len(given.points)} (r, z) pairs, as loaded), got {flat.size}"
         )
     points = flat.reshape(-1, 2)
+    if _repeats_first_point(given):
+        # The closing copy of the first point follows it: the gradient
+        # reaches the first copy alone (the surface reads that one), so an
+        # optimiser moved only it, and the next update refused the profile
+        # as open. (Its own value in ``points`` is not read.)
+        points = points.copy()
+        points[-1] = points[0]
     labels = PointLabels.counting(who, len(points))  # "WHO, point 1", ... (built only when read)
     surface = make_surface(given.kind, points, given.sharp, labels, who, given.crease_angle,
                            given.smooth, given.open_sheet)
