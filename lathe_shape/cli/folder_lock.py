@@ -93,7 +93,8 @@ class FolderLock:
             interrupt.__exit__(None, None, None)
 
     def _register(self) -> None:
-        record = {"pid": os.getpid(), "job": self.job, "frames": [self.frames.start, self.frames.stop]}
+        record = {"pid": os.getpid(), "prog": self.prog, "job": self.job,
+                  "frames": [self.frames.start, self.frames.stop]}
         new = self.path + ".new"
         fd = os.open(new, os.O_CREAT | os.O_TRUNC | os.O_RDWR, 0o644)
         try:
@@ -154,7 +155,8 @@ class FolderLock:
     def _refuse(self, record: dict, pid: int) -> None:
         other_job = record.get("job", {})
         start, stop = record.get("frames", [0, 0])
-        where = f"output folder '{self.folder}' is in use by another {self.prog} (pid {pid})"
+        other = record.get("prog", self.prog)  # (a sweep and a turntable share the folder's registrations)
+        where = f"output folder '{self.folder}' is in use by another {other} (pid {pid})"
         differs = sorted(key for key in set(other_job) | set(self.job)
                          if other_job.get(key) != self.job.get(key))
         if differs:

@@ -109,17 +109,19 @@ def describe_polyline(path: str, points, sharp, labels, crease_angle: float,
 def describe_bspline(path: str, spline) -> str:
     """The one-line summary of a validated curve profile (any kind but
     polyline)."""
-    import numpy as np
 
     from ..profiles.bspline import cubic_ranges, power_coefficients
 
     # The curve's own extent (bounds() gives the control polygon's for a
     # B-spline, which bounds the curve), round-off at 0 shown as 0
-    coef = power_coefficients(spline.segment_controls)
-    r, z = cubic_ranges(coef[:, 0]), cubic_ranges(coef[:, 1])
-    tiny = 1e-12 * float(np.abs(spline.segment_controls).max())
-    r_max, z_min, z_max = (0.0 if abs(v) <= tiny else v
-                           for v in (float(r[:, 1].max()), float(z[:, 0].min()), float(z[:, 1].max())))
+    if hasattr(spline, "segment_controls"):
+        coef = power_coefficients(spline.segment_controls)
+        r, z = cubic_ranges(coef[:, 0]), cubic_ranges(coef[:, 1])
+        extent = float(r[:, 1].max()), float(z[:, 0].min()), float(z[:, 1].max())
+    else:  # (sor: its bounds are the curve's, exactly)
+        extent = spline.bounds()
+    tiny = 1e-12 * max(abs(v) for v in extent)
+    r_max, z_min, z_max = (0.0 if abs(v) <= tiny else v for v in extent)
     if spline.kind == "bspline":
         form = "closed periodic" if spline.closed_loop else "solid, ends on the axis"
         what = "cubic B-spline profile"

@@ -88,6 +88,18 @@ SLIDE_FACTOR = 1.25
 OUTLINE_CAMERAS = frozenset({"PerspectiveCamera", "ThinLensCamera"})
 
 
+def _parameter_values(params) -> list:
+    """The values of ``params``: a ``mi.SceneParameters``, a dict, a list
+    or tuple (what ``render_forward`` takes), or a single value."""
+    if isinstance(params, mi.SceneParameters):
+        return [params[key] for key in params.keys()]
+    if isinstance(params, dict):
+        return list(params.values())
+    if isinstance(params, (list, tuple)):
+        return list(params)
+    return [params] if params is not None else []
+
+
 def _sensor(scene: mi.Scene, sensor: int | mi.Sensor) -> mi.Sensor:
     return scene.sensors()[sensor] if isinstance(sensor, int) else sensor
 
@@ -278,9 +290,8 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
         # (the parameters other than the lathes' points whose tangents the
         # interior pass propagates, see _forward_tangent)
         self._forward_lathes = lathes = self.geometry(scene).lathes
-        self._forward_sources = [] if not isinstance(params, mi.SceneParameters) else [
-            params[key] for key in params.keys()
-            if not any(params.properties[key][2] is lathe for lathe in lathes) or not key.endswith(".points")]
+        self._forward_sources = [value for value in _parameter_values(params)
+                                 if not any(value is lathe.profile_points for lathe in lathes)]
         try:
             with self._attached_pass_only(seed, camera):
                 image = super().render_forward(scene, params, sensor, seed, spp)
@@ -475,12 +486,15 @@ class LathePRBIntegrator(exact_lathe_base(RBIntegrator)):
 
     def _forward_tangent(self, L: mi.Spectrum) -> mi.Spectrum:
         """The tangent of ``L`` for the tangents set on the render's
-        parameters: propagated forward from them (``dr.forward_to(L)``,
-        which traverses only towards ``L``, refused the edges from a
-        parameter into a BSDF's or emitter's method called as a function,
-        such as a diffuse reflectance's: "tried to forward-propagate
-        derivatives across edge ... outside of the current
-        dr.isolate_grad() scope")."""
+        parameters. With the lathes' points alone, ``dr.forward_to(L)``.
+        With other parameters (a BSDF's, an emitter's), propagated forward
+        from them: ``dr.forward_to(L)``, which traverses only towards
+        ``L``, refused the edges from a parameter into a BSDF's or
+        emitter's method called as a function, such as a diffuse
+        reflectance's ("tried to forward-propagate derivatives across edge
+        ... outside of the current dr.isolate_grad() scope"). That
+        propagation reaches every graph built on those parameters, and
+        consumes it (Mitsuba's ``prb`` refuses the case outright)."""
         sources = [value for value in self._forward_sources if dr.grad_enabled(value)]
         if not sources:
             return dr.forward_to(L)  # (the lathes' points alone: read outside any such method)

@@ -215,7 +215,8 @@ def _held_on_axis(given: ProfileInput) -> np.ndarray:
     of several points (keep those on the axis in the optimiser)."""
     points = np.asarray(given.points)
     held = np.zeros(len(points), dtype=bool)
-    if not given.open_sheet and given.kind in ("polyline", "bspline", "bezier"):
+    loop = len(points) > 1 and bool(np.all(points[0] == points[-1]))  # (a closed loop's points are free)
+    if not given.open_sheet and not loop and given.kind in ("polyline", "bspline", "bezier"):
         for k in (0, len(points) - 1):
             held[k] = points[k, 0] == 0.0
     return held

@@ -474,3 +474,17 @@ def test_adam_moves_a_closing_copy_with_the_first_point():
         params.update(optimizer)
     given = scene_lathes(scene)[0].surface.given.points
     assert np.array_equal(given[0], given[-1]) and np.abs(given[0] - [0.3, 0.0]).max() > 0.005
+
+
+@pytest.mark.parametrize("kind", ["polyline", "bspline"])
+def test_a_closed_loops_points_on_the_axis_are_free(kind):
+    """Only a solid's two ends on the axis are held: a closed loop that
+    touches the axis at its first (and repeated last) point moves there."""
+    from lathe_shape.plugin.profile_param import profile_index
+
+    scene = lathe_scene(profile="0 0.5, 1 0, 1.2 0.5, 1 1, 0 0.5", kind=kind, resolution=8)
+    held = np.array(profile_index(scene_lathes(scene)[0].surface).held)
+    assert not held.any()
+    solid = lathe_scene(kind=kind, resolution=8)
+    assert np.array(profile_index(scene_lathes(solid)[0].surface).held).tolist() == [
+        True, False, False, False, False, False, True]

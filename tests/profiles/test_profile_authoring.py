@@ -113,3 +113,11 @@ def test_no_open_overrides_the_files_open_line(tmp_path, capsys):
     path.write_text("# open: true\n0,0\n1,0\n1,1\n0,1\n")
     assert cli.main([str(path)]) == 0 and "open sheet" in capsys.readouterr().out
     assert cli.main([str(path), "--no-open"]) == 0 and "both ends on the axis" in capsys.readouterr().out
+
+
+def test_sor_summary(capsys):
+    """The curve's extent of a B-spline (its control polygon's was shown)
+    is no sor's: its summary failed with an AttributeError."""
+    assert cli.main([str(ROOT / "scenes" / "pov_samples" / "profiles" / "Bottle.csv")]) == 0
+    assert "valid sor profile, 8 control points, 7 curve segments, solid, ends on the axis, r <= 2.11823, " \
+        "z in [0, 10]" in capsys.readouterr().out
