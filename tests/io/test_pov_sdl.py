@@ -174,3 +174,16 @@ def test_self_crossing_loop(tmp_path, capsys, strict):
         assert rc == 0 and "warning: the curve crosses itself" in captured.err
         assert (out / "goblet_lathe1_loop1.csv").is_file()
         assert 'id="goblet_lathe1_loop1"' in (out / "goblet_lathe1.xml").read_text()
+
+
+def test_a_missing_include_inside_an_if(tmp_path):
+    """Inside an #if, the failed include's recovery dropped the #if: the
+    lathe after it was lost and '#else/#end without a matching #if' noted."""
+    path = tmp_path / "scene.pov"
+    path.write_text('#if (1)\n  #include "mine.inc"\n'
+                    "  lathe { 4, <0, 0>, <1, 0>, <1, 1>, <0, 1> translate 3*x }\n"
+                    "#else\n  lathe { 4, <0, 0>, <2, 0>, <2, 1>, <0, 1> }\n#end\n")
+    blocks, notes = read_pov_objects(path)
+    assert [(b.name, b.transform[0, 3]) for b in blocks if b.error is None][0] == ("scene_lathe1", 3.0)
+    assert not any("without a matching #if" in n for n in notes)
+    assert sum("mine.inc" in n for n in notes) == 1

@@ -122,12 +122,11 @@ def walk_scene(path: str, include_path: tuple[str, ...] = INCLUDE_PATH,
                 continue  # (the tokens read ahead, in pushback, come next)
             if not peeked and interp.statement_directive == "#include":
                 # An #include that failed was read to its end, its name
-                # (and the token after it, read ahead): the next statement
-                # follows. Skipping "its statement" from there dropped the
-                # object after a missing include.
-                ahead = list(interp.pushback)
-                interp.unwind(state)
-                interp.pushback.extend(ahead)
+                # (and the token after it, read ahead), and opened nothing:
+                # the next statement follows, in the #if or #while the
+                # include sat in (nothing to unwind). Skipping "its
+                # statement" from there dropped the object after a missing
+                # include.
                 continue
             interp.unwind(state)
             _top_level_skip(interp, frame, pos)
