@@ -33,7 +33,7 @@ def compare(args: argparse.Namespace) -> int:
     from lathe_shape.validation.povray_compare import aa_grid, compare_scene
 
     cli.check_render_options(args)
-    cli.check_at_least("--max-depth", args.max_depth, 1)
+    cli.check_at_least("--max-depth", args.max_depth, 2)  # (1 renders emitters alone: black)
     scene = cli.open_scene(args.scene, args.variant, args.defines, args.resolution)
     out = cli.output_folder(args.output)
     try:
@@ -63,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     cli.add_output_option(parser, default=os.path.join("out", "povray"), what="scene.pov, images, sheet")
     cli.add_render_options(parser, spp_default=16, spp_help="16; rounded to n*n, POV-Ray's n x n grid")
     parser.add_argument("--max-depth", type=int, default=10,
-                        help="lathe_whitted max_depth and POV-Ray max_trace_level (default: 10)")
+                        help="lathe_whitted max_depth, at least 2; POV-Ray's max_trace_level is one "
+                             "less, as it does not count the segment to the light (default: 10)")
     return cli.run_command(PROG, parser, compare, argv)
 
 

@@ -119,6 +119,7 @@ def study(args: argparse.Namespace) -> int:
 
     select_variant(args.variant)
     cli.check_at_least("--spp", args.spp, 1)
+    cli.check_between("--seed", args.seed, 0, cli.UINT32_MAX)
     size = render_size(args.resolution, 32 if args.quick else 128)
     spp = args.spp or (2 if args.quick else 16)
     counts = [16, 31, 64] if args.quick else [16, 24, 31, 42, 64, 96, 128, 192]

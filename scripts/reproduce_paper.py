@@ -79,9 +79,12 @@ def render_all(paper, args, out: str, size, spp: int, ref_spp: int) -> tuple[dic
         print(f"  rendered {name} in {seconds:.2f} s", flush=True)
     for name in sorted(paper.references):
         ref = paper.references[name]
-        image, _ = render_exact(paper.scene(ref.figure), ref_spp, args.seed + 1, size, defines,
+        image, _ = render_exact(paper.scene(ref.figure), ref_spp, (args.seed + 1) % 2**32, size, defines,
                                 profile_file=ref.profile_file, integrator=args.integrator)
         references[name] = image
+        if not image[..., :3].any():  # (a zero error against a black image says nothing)
+            print(f"  warning: reference {name} is black (max_depth too small to reach a light?): "
+                  "its errors say nothing", file=sys.stderr, flush=True)
         write_exr(os.path.join(out, f"reference_{name}.exr"), image, {"spp": ref_spp})
         write_png(os.path.join(out, f"reference_{name}.png"), image)
     return images, times, references
@@ -114,6 +117,7 @@ def reproduce(args: argparse.Namespace) -> int:
         return make_profiles(paper)
     cli.check_at_least("--spp", args.spp, 1)
     cli.check_at_least("--ref-spp", args.ref_spp, 1)
+    cli.check_between("--seed", args.seed, 0, cli.UINT32_MAX)
     size = render_size(args.resolution, 48 if args.quick else 512)
     spp = args.spp or (4 if args.quick else 64)
     ref_spp = args.ref_spp or (16 if args.quick else 4 * spp)

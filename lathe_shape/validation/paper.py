@@ -231,7 +231,7 @@ def render_exact(
     max_depth = int(defines.get("max_depth", _declared_default(path, "max_depth") or -1))
     renderer = mi.load_dict({"type": integrator, "max_depth": max_depth, "normal_check": "none"})
     if warm:
-        mi.render(scene, spp=spp, seed=seed + 1000, integrator=renderer).numpy()
+        mi.render(scene, spp=spp, seed=(seed + 1000) % 2**32, integrator=renderer).numpy()
     start = time.perf_counter()
     image = mi.render(scene, spp=spp, seed=seed, integrator=renderer).numpy()
     return image, time.perf_counter() - start
@@ -250,6 +250,9 @@ def write_sheet(path: str | os.PathLike, images: list[tuple[str, np.ndarray]],
         full = Image.fromarray(to_srgb8(rgb))
         w, h = full.size
         box = (int(zoom_box[0] * w), int(zoom_box[1] * h), int(zoom_box[2] * w), int(zoom_box[3] * h))
+        # (at least one pixel: a 1x1 image's zoom box was empty, a division by zero)
+        box = (min(box[0], w - 1), min(box[1], h - 1), max(box[2], min(box[0], w - 1) + 1),
+               max(box[3], min(box[1], h - 1) + 1))
         zoom = full.crop(box).resize((w, int(w * (box[3] - box[1]) / (box[2] - box[0]))), Image.NEAREST)
         tile = Image.new("RGB", (w, h + zoom.size[1] + 18), "white")
         tile.paste(full, (0, 18))

@@ -68,7 +68,8 @@ def render_povray(pov_file: str | os.PathLike, size: tuple[int, int], grid: int,
     output = pov_file.with_suffix(".exr")
     threads = threads or os.cpu_count() or 1
     aa = ["+A0.0", "+AM1", f"+R{grid}"] if grid > 1 else ["-A"]
-    command = [POVRAY, f"+I{pov_file}", f"+O{output}", "+FE", f"+W{size[0]}", f"+H{size[1]}",
+    # (bare names: it runs in their folder, and POV-Ray splits its options at spaces)
+    command = [POVRAY, f"+I{pov_file.name}", f"+O{output.name}", "+FE", f"+W{size[0]}", f"+H{size[1]}",
                *aa, f"+WT{threads}", "-D", "-P", "-V", "-GA"]
     start = time.perf_counter()
     proc = subprocess.run(command, capture_output=True, text=True, cwd=pov_file.parent)
@@ -88,7 +89,7 @@ def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple
 
     integrator = mi.load_dict({"type": "lathe_whitted", "max_depth": max_depth, "shadows": "filtered"})
     start = time.perf_counter()
-    mi.render(scene, spp=spp, seed=seed + 1, integrator=integrator).numpy()
+    mi.render(scene, spp=spp, seed=(seed + 1) % 2**32, integrator=integrator).numpy()
     first = time.perf_counter() - start
     start = time.perf_counter()
     image = mi.render(scene, spp=spp, seed=seed, integrator=integrator).numpy()
@@ -97,13 +98,18 @@ def render_whitted(scene, spp: int, seed: int = 0, max_depth: int = 10) -> tuple
 
 def compare_scene(scene, folder: str | os.PathLike, spp: int, max_depth: int = 10,
                   seed: int = 0) -> Comparison:
-    """Export ``scene`` to ``folder/scene.pov``, render both, compare."""
+    """Export ``scene`` to ``folder/scene.pov``, render both, compare
+    (``max_depth`` is ``lathe_whitted``'s; POV-Ray's ``max_trace_level``
+    is one less, at least 1)."""
     from ..tools.images import image_errors
     from ..tools.povray_export import scene_to_pov
 
     folder = Path(folder)
     pov_file = folder / "scene.pov"
-    pov_file.write_text(scene_to_pov(scene, max_trace_level=max_depth), encoding="utf-8")
+    # lathe_whitted's max_depth counts the segment to the light too (1: only
+    # emitters seen directly); POV-Ray's max_trace_level counts traced rays
+    # (1: direct light): depth d + 1 is POV-Ray's level d
+    pov_file.write_text(scene_to_pov(scene, max_trace_level=max(1, max_depth - 1)), encoding="utf-8")
     grid = aa_grid(spp)
     size = tuple(int(v) for v in scene.sensors()[0].film().size())
     povray, povray_seconds = render_povray(pov_file, size, grid)

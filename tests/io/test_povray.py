@@ -53,14 +53,18 @@ def test_compare_povray_end_to_end(tmp_path, capsys):
     spec = importlib.util.spec_from_file_location("compare_povray", ROOT / "scripts" / "compare_povray.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    out = tmp_path / "cmp"
+    out = tmp_path / "cmp out"  # (a space: POV-Ray split its +I option there)
     rc = module.main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "--resolution", "32x24", "--spp", "1",
-                      "-o", str(out), "--variant", VARIANT])
+                      "-o", str(out), "--variant", VARIANT, "--max-depth", "4"])
     assert rc == 0
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert re.fullmatch(r"povray \d+\.\d\d s, lathe_whitted \d+\.\d\d s, ratio \d+\.\d\dx", last), last
     for name in ("scene.pov", "povray.exr", "lathe_whitted.exr", "sheet.png"):
         assert (out / name).is_file(), name
+    # lathe_whitted's depth counts the segment to the light, POV-Ray's level does not
+    assert "max_trace_level 3 " in (out / "scene.pov").read_text()
+    assert module.main([str(ROOT / "scenes" / "paper" / "fig9.xml"), "-o", str(out), "--max-depth", "1",
+                        "--variant", VARIANT]) == 2
 
 
 def test_compare_povray_help_and_errors(tmp_path):

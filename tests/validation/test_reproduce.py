@@ -74,3 +74,13 @@ def test_lathe_compare_errors(tmp_path, capsys):
                           '</sensor><shape type="rectangle"/></scene>')
     assert main([str(floor_only), "-o", str(tmp_path / "o"), "--variant", VARIANT]) == 2
     assert "no lathe" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("script", ["reproduce_paper.py", "open_problems.py"])
+def test_seed_out_of_range_is_one_line(tmp_path, script):
+    """--seed -1 gave nanobind's TypeError from deep in the render."""
+    proc = subprocess.run([sys.executable, str(ROOT / "scripts" / script), "--quick", "--seed", "-1", "-o",
+                           str(tmp_path / "o"), "--variant", VARIANT],
+                          capture_output=True, text=True, timeout=300, cwd=str(ROOT))
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == f"{script}: error: --seed must be at least 0, got -1"
