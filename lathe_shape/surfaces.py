@@ -265,15 +265,18 @@ class BSplineSurface(_KernelSurface):
         points[np.abs(points[:, 0]) < 1e-12 * scale, 0] = 0.0
         if self.profile.closed_loop:
             points[-1] = points[0]  # bit-identical seam positions
-        return points, normals, v
+        return _split_corners(points, normals, v, index, t, self._derivative)
 
     def mesh_rings(self) -> int:
+
         """One per adaptive sample (:attr:`profile_samples`)."""
         return len(self.profile_samples[0])
 
     def tessellate(self, steps: int, max_bands: int | None = None) -> TriangleMesh:
         points, normals, v = self.profile_samples
         start = np.arange(len(points) - 1)
+        # (a corner's two rings, at one point: no band between them)
+        start = start[np.any(points[start] != points[start + 1], axis=1)]
         bands = np.stack([start, start + 1], axis=1)
         return revolve(points, normals, v, bands, steps, max_bands)
 
@@ -282,6 +285,31 @@ class BSplineSurface(_KernelSurface):
 
     def geometry(self, p: mi.Point3f, seg: mi.UInt32, u: mi.Float) -> LatheGeometry:
         return bspline_geometry(self.data, p, seg, u)
+
+
+def _split_corners(points: np.ndarray, normals: np.ndarray, v: np.ndarray, index: np.ndarray, t: np.ndarray,
+                   derivative) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples with a second ring at every joint where the curve turns
+    a corner (a ``bezier`` or ``catmull_rom`` joint whose tangents differ
+    by more than 0.5 degrees): the first ring with the normal the segment
+    before ends with, the second with the one after starts with. With a
+    single ring at a corner its normal was the next segment's: a straight
+    Bezier wall between two corners was shaded with the bottom's normal at
+    its foot, in black bands on the reference mesh."""
+    joints = np.flatnonzero((t == 0.0) & (index > 0))
+    if len(joints) == 0:
+        return points, normals, v
+    dr, dz = derivative(index[joints] - 1, np.ones(len(joints)))
+    before = np.stack([dz, -dr], axis=1) * -1.0  # (the left-hand normal, as in profile_samples)
+    length = np.linalg.norm(before, axis=1)
+    usable = length > 0.0
+    before[usable] /= length[usable, None]
+    corner = usable & (np.einsum("ij,ij->i", before, normals[joints]) < np.cos(np.radians(0.5)))
+    at = joints[corner]
+    if len(at) == 0:
+        return points, normals, v
+    return (np.insert(points, at, points[at], axis=0), np.insert(normals, at, before[corner], axis=0),
+            np.insert(v, at, v[at]))
 
 
 class SorSurface(BSplineSurface):

@@ -195,6 +195,11 @@ def _open_profile(pts: np.ndarray, flags: np.ndarray, labels: Sequence[str], sou
     chain is reversed, if need be, so that it faces away from the axis."""
     if len(pts) < 2:
         raise ProfileError(f"{source}: an open profile needs at least 2 points, got {len(pts)}")
+    if len(pts) > 2 and np.all(pts[0] == pts[-1]):
+        # (else: "intersects itself" at the closing point, naming its two segments)
+        raise ProfileError(f"{labels[len(pts) - 1]}: the profile is closed (its last point repeats the "
+                           f"first, ({_fmt(pts[0])})), but it is read as an open sheet ('open' true): "
+                           f"drop the repeated point for a sheet, or set 'open' false for a solid")
     _check_segment_lengths(pts, labels, False)
     tol = touch_tolerance(pts)
     _check_short_segments(pts, labels, False, tol)

@@ -379,6 +379,7 @@ def scene_parity_leaks(filename: str, n: int, seed: int, mesh_segments: int = 51
     else:
         # B-splines: the reference mesh's profile samples stand for vertices
         points = lathe.surface.profile_samples[0]
+        points = points[np.r_[True, np.any(points[1:] != points[:-1], axis=1)]]  # (a corner's two rings)
         start, end = points[:-1], points[1:]
     rng = np.random.default_rng(seed)
     counts = {"rays": 0} | {f"{what}_{name}": 0 for name in walks for what in ("hitting", "odd", "stuck")}

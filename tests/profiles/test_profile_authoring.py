@@ -121,3 +121,12 @@ def test_sor_summary(capsys):
     assert cli.main([str(ROOT / "scenes" / "pov_samples" / "profiles" / "Bottle.csv")]) == 0
     assert "valid sor profile, 8 control points, 7 curve segments, solid, ends on the axis, r <= 2.11823, " \
         "z in [0, 10]" in capsys.readouterr().out
+
+
+def test_a_closed_profile_read_as_an_open_sheet(tmp_path):
+    """'open' on a closed loop said the profile intersects itself, naming
+    the two segments that meet at the closing point."""
+    with pytest.raises(Exception, match=re.escape(
+            "point 5: the profile is closed (its last point repeats the first, (1, 0)), but it is read as "
+            "an open sheet ('open' true)")):
+        mi.load_dict({"type": "lathe", "profile": "1 0, 2 0, 2 1, 1 1, 1 0", "open": True})
