@@ -69,7 +69,7 @@ from .profiles.spline_kinds import CUBIC_KINDS, make_cubic_profile
 from .tessellate import TriangleMesh, revolve, tessellate_profile
 
 __all__ = ["Surface", "CurveSurface", "PolylineSurface", "BSplineSurface", "SorSurface", "Kind", "KINDS",
-           "SURFACE_KINDS", "cli_kind_names", "get_kind", "kind_of", "make_surface", "refuse_sharp_flags",
+           "SURFACE_KINDS", "cli_kind_names", "get_kind", "kind_of", "make_surface", "check_curve_points",
            "register_kind",
            "unregister_kind"]
 
@@ -268,7 +268,6 @@ class BSplineSurface(_KernelSurface):
         return _split_corners(points, normals, v, index, t, self._derivative)
 
     def mesh_rings(self) -> int:
-
         """One per adaptive sample (:attr:`profile_samples`)."""
         return len(self.profile_samples[0])
 
@@ -300,7 +299,7 @@ def _split_corners(points: np.ndarray, normals: np.ndarray, v: np.ndarray, index
     if len(joints) == 0:
         return points, normals, v
     dr, dz = derivative(index[joints] - 1, np.ones(len(joints)))
-    before = np.stack([dz, -dr], axis=1) * -1.0  # (the left-hand normal, as in profile_samples)
+    before = np.stack([-dz, dr], axis=1)  # (the left-hand normal, as in profile_samples)
     length = np.linalg.norm(before, axis=1)
     usable = length > 0.0
     before[usable] /= length[usable, None]
@@ -336,12 +335,11 @@ def _polyline_surface(kind, points, sharp, labels, source, crease_angle, smooth,
     return PolylineSurface(profile, smooth)
 
 
-def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels, points: np.ndarray | None = None) -> None:
-    """The curve kinds are smooth: a sharp flag is an error naming its
-    point (``labels``); with ``points``, a point that is not finite or too
-    large is one too (named by its line, not its control-point number)."""
-    if points is not None and len(points) == len(labels):
-        check_finite_points(points, labels)
+def check_curve_points(kind: str, points: np.ndarray, sharp: np.ndarray, labels) -> None:
+    """The checks of a curve kind's points that name a point by its label
+    (file and line, not its control-point number): finite and not too
+    large, and no sharp flag (the curve kinds are smooth)."""
+    check_finite_points(points, labels)
     if np.any(sharp):
         k = int(np.argmax(sharp))
         raise ProfileError(
@@ -350,7 +348,7 @@ def refuse_sharp_flags(kind: str, sharp: np.ndarray, labels, points: np.ndarray 
 
 
 def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    refuse_sharp_flags(kind, sharp, labels, points)
+    check_curve_points(kind, points, sharp, labels)
     if open_sheet:
         raise ProfileError(f"{source}: kind 'bspline' has no open form; use 'bezier' or "
                            f"'catmull_rom' for an open sheet")
@@ -359,12 +357,12 @@ def _bspline_surface(kind, points, sharp, labels, source, crease_angle, smooth, 
 
 def _cubic_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
     """Bezier, Catmull-Rom and quadratic profiles (converted to B-spline cubics)."""
-    refuse_sharp_flags(kind, sharp, labels, points)
+    check_curve_points(kind, points, sharp, labels)
     return BSplineSurface(make_cubic_profile(kind, points, source, open_sheet))
 
 
 def _sor_surface(kind, points, sharp, labels, source, crease_angle, smooth, open_sheet):
-    refuse_sharp_flags(kind, sharp, labels, points)
+    check_curve_points(kind, points, sharp, labels)
     return SorSurface(make_sor_profile(points, source, open_sheet))
 
 

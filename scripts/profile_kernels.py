@@ -18,6 +18,7 @@ Dr.Jit launching the kernels.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -73,52 +74,37 @@ def main(argv: list[str] | None = None) -> int:
     width, height = args.size
     if height != width:
         raise SystemExit("profile_kernels.py: --resolution must be square (WxW)")
-    if args.gradient:
-        from lathe_shape.plugin.shape import scene_lathes
-        from lathe_shape.tools.diff_scenes import glass_scene
-        from lathe_shape.tools.gradients import points_key
+    with contextlib.ExitStack() as stack:
+        if args.gradient:
+            from lathe_shape.tools.diff_scenes import glass_scene
+            from lathe_shape.tools.gradients import gradient_passes
 
-        scene = glass_scene(str(ROOT / "scenes" / "wine_glass.csv"), resolution=width,
-                            max_depth=args.max_depth)
-        # glass_scene's lathe_prb has no Russian roulette: nor has the primal
-        primal = mi.load_dict({"type": "lathe_path", "max_depth": args.max_depth, "rr_depth": args.max_depth})
-        params = mi.traverse(scene)
-        keys = [points_key(params, lathe) for lathe in scene_lathes(scene)]
-        for key in keys:
-            dr.enable_grad(params[key])
-        params.update()
-        film = scene.sensors()[0].film()
-        weights = mi.TensorXf(dr.full(mi.Float, 1.0, dr.prod(film.size()) * film.base_channels_count()),
-                              (film.size()[1], film.size()[0], film.base_channels_count()))
+            scene = glass_scene(str(ROOT / "scenes" / "wine_glass.csv"), resolution=width,
+                                max_depth=args.max_depth)
+            # glass_scene's lathe_prb has no Russian roulette: nor has the primal
+            primal = mi.load_dict({"type": "lathe_path", "max_depth": args.max_depth,
+                                   "rr_depth": args.max_depth})
+            passes = stack.enter_context(gradient_passes(scene, primal, args.spp))
+            cases = {"primal (lathe_path)": passes["primal"], "backward (lathe_prb)": passes["backward"]}
+        else:
+            from lathe_shape.validation.caustics_bench import SCENES, load, path_integrator
 
-        def backward(seed: int):
-            scene.integrator().render_backward(scene, params, weights, seed=seed, spp=args.spp)
-            for key in keys:
-                dr.grad(params[key]).numpy()
-                dr.clear_grad(params[key])
+            if args.scene not in SCENES:
+                raise SystemExit(f"profile_kernels.py: unknown --scene '{args.scene}' "
+                                 f"(expected one of: {', '.join(SCENES)})")
+            scene = load(args.scene, str(ROOT), width)
 
-        def primal_render(seed: int):
-            mi.render(scene, spp=args.spp, seed=seed, integrator=primal).numpy()
+            def renderer(caustics: bool):
+                integrator = path_integrator(caustics)
+                return lambda seed: mi.render(scene, spp=args.spp, seed=seed, integrator=integrator).numpy()
 
-        cases = {"primal (lathe_path)": primal_render, "backward (lathe_prb)": backward}
-    else:
-        from lathe_shape.validation.caustics_bench import SCENES, load, path_integrator
-
-        if args.scene not in SCENES:
-            raise SystemExit(f"profile_kernels.py: unknown --scene '{args.scene}' "
-                             f"(expected one of: {', '.join(SCENES)})")
-        scene = load(args.scene, str(ROOT), width)
-        def renderer(caustics: bool):
-            integrator = path_integrator(caustics)
-            return lambda seed: mi.render(scene, spp=args.spp, seed=seed, integrator=integrator).numpy()
-
-        cases = {f"{name} {args.scene}": renderer(caustics)
-                 for name, caustics in (("plain", False), ("caustics", True))}
-    for run in cases.values():
-        run(args.seed)  # the warm-up: JIT compilation
-    for k in range(1, args.repeat + 1):
-        for name, run in cases.items():
-            report(name, profiled(lambda: run(args.seed + k), args.top))  # noqa: B023 (called at once)
+            cases = {f"{name} {args.scene}": renderer(caustics)
+                     for name, caustics in (("plain", False), ("caustics", True))}
+        for run in cases.values():
+            run(args.seed)  # the warm-up: JIT compilation
+        for k in range(1, args.repeat + 1):
+            for name, run in cases.items():
+                report(name, profiled(lambda: run(args.seed + k), args.top))  # noqa: B023 (called at once)
     return 0
 
 

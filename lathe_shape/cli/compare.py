@@ -217,18 +217,17 @@ def comparison_runs(scene) -> dict[str, dict]:
     return MEDIA_RUNS if media or scene.sensors()[0].get_medium() is not None else RUNS
 
 
-def render_both(args: argparse.Namespace, scene, spp: int,
-                depth: int) -> dict[str, tuple[np.ndarray, float, list[str]]]:
+def render_both(args: argparse.Namespace, scene, spp: int, depth: int,
+                runs: dict[str, dict]) -> dict[str, tuple[np.ndarray, float, list[str]]]:
     """Render ``exact`` (lathe_path, normal_check none, or lathe_volpath)
-    and ``mesh`` (path, or volpath) with the same seed (see
-    :func:`comparison_runs`); returns name -> (image, seconds, channel
+    and ``mesh`` (path, or volpath) as ``runs`` (:func:`comparison_runs`)
+    says, with the same seed; returns name -> (image, seconds, channel
     names)."""
     import mitsuba as mi
 
     from .common import render_film
 
     images = {}
-    runs = comparison_runs(scene)
     for name, integrator in runs.items():
         start = time.perf_counter()
         image, channels = render_film(scene, spp, args.seed, mi.load_dict({**integrator, "max_depth": depth}))
@@ -287,7 +286,7 @@ def compare(args: argparse.Namespace) -> int:
         print("  note: the scene has media: lathe_volpath and volpath draw their samples apart, so the "
               "difference holds their noise too (render both at more spp to see the mesh's error)",
               flush=True)
-    images = render_both(args, scene, spp, depth)
+    images = render_both(args, scene, spp, depth, runs)
     scale = write_comparison(args, out, spp, images, runs)
     err = image_errors(_colour(images["mesh"][0]), _colour(images["exact"][0]))
     print(f"  mesh vs exact: relative mean abs error {err['rel_mae']:.4f}, relative RMSE "

@@ -184,7 +184,7 @@ def check_or_convert(args: argparse.Namespace) -> int:
     """Validate the profile and print its summary, convert it, or import a
     POV-Ray file."""
     from ..profiles import make_bspline_profile, read_points, read_profile_options
-    from ..surfaces import make_surface, refuse_sharp_flags
+    from ..surfaces import check_curve_points, make_surface
 
     if (args.input is None) == (args.from_pov is None):
         raise CliError("give a profile file, or --from-pov FILE.pov (not both)")
@@ -213,7 +213,7 @@ def check_or_convert(args: argparse.Namespace) -> int:
                                 polyline, kind))
         return 0
     if kind == "bspline" and not open_sheet:
-        refuse_sharp_flags(kind, sharp, labels, points)  # (as the lathe shape does: make_surface)
+        check_curve_points(kind, points, sharp, labels)  # (as the lathe shape does: make_surface)
         spline = make_bspline_profile(points, args.input)
     else:
         spline = make_surface(kind, points, sharp, labels, args.input, open_sheet=open_sheet).profile

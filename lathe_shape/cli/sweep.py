@@ -295,8 +295,9 @@ def _sweep_into(args: argparse.Namespace, renders: list, specs: list, out_dir: s
                     progress.advance(render.seconds)
             with atomic_path(os.path.join(out_dir, INDEX)) as tmp, open(tmp, "w", encoding="utf-8") as f:
                 f.write(_index_text(renders, done, names))
-            stale = sorted(name for name in os.listdir(out_dir) if _RENDER_FILE.fullmatch(name)
-                           and name[:-4] not in set(names))
+            current = {name + ".exr" for name in names}
+            stale = sorted(name for name in os.listdir(out_dir)
+                           if _RENDER_FILE.fullmatch(name) and name not in current)
             for name in stale:  # (an earlier, longer sweep's: not in the index)
                 os.remove(os.path.join(out_dir, name))
             if stale:

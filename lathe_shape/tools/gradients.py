@@ -13,7 +13,9 @@ one profile segment only, in all of their footprint and their neighbours';
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -25,8 +27,8 @@ if TYPE_CHECKING:
     from ..plugin.shape import LatheShape
 
 __all__ = ["GlassGradient", "GradientCheck", "check_gradient", "finite_difference", "forward_gradient",
-           "glass_gradient", "glass_outline_pixels", "gradient_times", "pixel_classes", "points_key",
-           "set_points", "wall_count"]
+           "glass_gradient", "glass_outline_pixels", "gradient_passes", "gradient_times", "pixel_classes",
+           "points_key", "set_points", "wall_count"]
 
 
 def points_key(params: mi.SceneParameters, lathe: LatheShape) -> str:
@@ -161,13 +163,15 @@ def check_gradient(scene: mi.Scene, lathe: LatheShape, index: int, h: float, spp
                          float(ad[silhouette].sum()), float(fd[silhouette].sum()), float(fd.sum()))
 
 
-def gradient_times(scene: mi.Scene, primal: mi.Integrator, spp: int, repeat: int,
-                   seed: int = 0) -> dict[str, list[float]]:
-    """Wall times of the primal render with ``primal`` (e.g. ``lathe_path``)
-    and of one backward pass of the scene's own integrator (``lathe_prb``:
-    ``render_backward``, its attached pass and reverse pass, for the gradient of the
-    image sum with respect to every lathe's points), interleaved, after one
-    warm-up of each (which pays the JIT compilation)."""
+@contextlib.contextmanager
+def gradient_passes(scene: mi.Scene, primal: mi.Integrator, spp: int) -> Iterator[dict[str, Callable]]:
+    """Within: ``{"primal": run, "backward": run}``, each ``run(seed)`` one
+    render with ``spp`` samples per pixel: the primal render with ``primal``
+    (e.g. ``lathe_path``), and one backward pass of the scene's own
+    integrator (``lathe_prb``: ``render_backward``, its attached pass and
+    reverse pass, for the gradient of the image sum with respect to every
+    lathe's points, read back). The points' gradients are enabled within,
+    and disabled after."""
     from ..plugin.shape import scene_lathes  # needs a variant
 
     params = mi.traverse(scene)
@@ -180,26 +184,36 @@ def gradient_times(scene: mi.Scene, primal: mi.Integrator, spp: int, repeat: int
     weights = mi.TensorXf(dr.full(mi.Float, 1.0, film.size()[0] * film.size()[1] * channels),
                           (film.size()[1], film.size()[0], channels))
 
-    def run_primal(k):
-        mi.render(scene, spp=spp, seed=seed + k, integrator=primal).numpy()
+    def run_primal(seed: int) -> None:
+        mi.render(scene, spp=spp, seed=seed, integrator=primal).numpy()
 
-    def run_backward(k):
-        scene.integrator().render_backward(scene, params, weights, seed=seed + k, spp=spp)
+    def run_backward(seed: int) -> None:
+        scene.integrator().render_backward(scene, params, weights, seed=seed, spp=spp)
         for key in keys:
             dr.grad(params[key]).numpy()
             dr.clear_grad(params[key])
 
-    cases = {"primal": run_primal, "backward": run_backward}
-    for run in cases.values():
-        run(0)
-    times: dict[str, list[float]] = {name: [] for name in cases}
-    for k in range(1, repeat + 1):
-        for name, run in cases.items():
-            start = time.perf_counter()
-            run(k)
-            times[name].append(time.perf_counter() - start)
-    for key in keys:
-        dr.disable_grad(params[key])
+    try:
+        yield {"primal": run_primal, "backward": run_backward}
+    finally:
+        for key in keys:
+            dr.disable_grad(params[key])
+
+
+def gradient_times(scene: mi.Scene, primal: mi.Integrator, spp: int, repeat: int,
+                   seed: int = 0) -> dict[str, list[float]]:
+    """Wall times of :func:`gradient_passes`'s primal render and backward
+    pass, interleaved (render ``k`` with ``seed + k``), after one warm-up
+    of each (which pays the JIT compilation)."""
+    with gradient_passes(scene, primal, spp) as cases:
+        for run in cases.values():
+            run(seed)
+        times: dict[str, list[float]] = {name: [] for name in cases}
+        for k in range(1, repeat + 1):
+            for name, run in cases.items():
+                start = time.perf_counter()
+                run(seed + k)
+                times[name].append(time.perf_counter() - start)
     return times
 
 
