@@ -107,6 +107,7 @@ def _read_csv_lines(path: str) -> RawPoints:
     """:func:`read_profile_csv` line by line, with a message naming the
     line for anything that is not a point, a comment or the header."""
     rows = _Rows(path, "line")
+    first: tuple[str, int] | None = None  # The first point's separator and line
     try:
         with open(path, "rb") as f:
             for number, raw in _numbered_lines(f):
@@ -116,6 +117,16 @@ def _read_csv_lines(path: str) -> RawPoints:
                 fields = _csv_fields(content)
                 if not rows.numbers and _is_header(fields):
                     continue
+                separator = _separator(content)
+                if separator == ";" and "," in content:
+                    raise ProfileError(f"{rows.label(number)}: a decimal comma ({content!r}); numbers are "
+                                       "written with a point (1.5, not 1,5)")
+                if first is None:
+                    first = separator, number
+                elif separator != first[0]:
+                    raise ProfileError(
+                        f"{rows.label(number)}: columns separated by {_SEPARATOR_NAMES[separator]}, where "
+                        f"line {first[1]} separates them by {_SEPARATOR_NAMES[first[0]]}: use one separator")
                 rows.add(fields, number, f"expected 2 or 3 columns (r,z[,sharp]), got {len(fields)}")
     except OSError as e:
         raise ProfileError(f"{path}: cannot read profile file ({e.strerror})") from None
@@ -133,9 +144,14 @@ def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
     coordinates: list[float] = []
     sharp: list[bool] = []
     numbers: list[int] = []
+    kind = None  # The pattern (separator) of the first point
     for number, line in enumerate(_LINE_END.split(text), start=1):
-        match = _ROWS[0].fullmatch(line) or _ROWS[1].fullmatch(line)
-        if match is None:
+        index, match = _row_match(line)
+        if match is not None:
+            kind = index if kind is None else kind
+            if index != kind:
+                return None  # (another separator than the first point's)
+        else:
             content = line.split("#", 1)[0].strip()
             if not content or (not numbers and _is_header(_csv_fields(content))):
                 continue
@@ -277,11 +293,30 @@ class _Rows:
         return points, sharp, PointLabels(self.prefix, np.frombuffer(self.numbers, np.int64), self.word)
 
 
+def _row_match(line: str) -> tuple[int, re.Match | None]:
+    """The index in :data:`_ROWS` (its separator) of the pattern that
+    ``line`` matches, and the match (``(-1, None)``: none)."""
+    for index, pattern in enumerate(_ROWS):
+        match = pattern.fullmatch(line)
+        if match is not None:
+            return index, match
+    return -1, None
+
+
+def _separator(content: str) -> str:
+    """The column separator of a CSV line's content: a semicolon if there is
+    one, else a comma if there is one, else white space (``" "``)."""
+    return ";" if ";" in content else "," if "," in content else " "
+
+
+_SEPARATOR_NAMES = {",": "commas", ";": "semicolons", " ": "white space"}
+
+
 def _csv_fields(content: str) -> list[str]:
-    """The fields of a CSV line's content (comment removed): separated by
-    commas or semicolons, else by white space."""
-    fields = [f.strip() for f in content.replace(";", ",").split(",")]
-    return fields if len(fields) > 1 else content.split()
+    """The fields of a CSV line's content (comment removed), split at its
+    :func:`_separator`."""
+    separator = _separator(content)
+    return content.split() if separator == " " else [f.strip() for f in content.split(separator)]
 
 
 def _is_header(fields: list[str]) -> bool:
@@ -299,11 +334,12 @@ _NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]
                      re.IGNORECASE)
 
 
-#: A CSV row of two or three columns separated by commas (or semicolons),
-#: or by white space, and an optional comment: the whole content of a line
-#: that :func:`read_profile_csv` accepts without a word.
+#: A CSV row of two or three columns separated by commas, semicolons or
+#: white space, and an optional comment: the whole content of a line that
+#: :func:`read_profile_csv` accepts without a word (every point of a file
+#: with the same separator).
 _ROWS = [re.compile(rf"\s*({_NUMBER.pattern})\s*{sep}\s*({_NUMBER.pattern})(?:\s*{sep}\s*([01]))?\s*(?:#.*)?",
-                    re.IGNORECASE) for sep in ("[,;]", r"\s")]
+                    re.IGNORECASE) for sep in (",", ";", r"\s")]
 #: Line ends as :func:`_numbered_lines` counts them.
 _LINE_END = re.compile("\r\n|\r|\n")
 

@@ -206,12 +206,14 @@ def test_fast_csv_reader_agrees_with_line_reader(tmp_path_factory, lines, end):
 
 
 @FUZZ
-@given(rows=_WELL_FORMED, header=st.sampled_from(["", "r,z\n", "R Z SHARP\n", "# comment\n"]))
-def test_fast_csv_reader_reads_well_formed_files(tmp_path_factory, rows, header):
-    """Well-formed files (any separator, flags, comments, a header) are read
-    by the fast path, with the line reader's result."""
-    text = header + "".join(f"{r!r}{sep}{z!r}{sep + flag if flag else ''}{note}\n"
-                            for r, z, flag, sep, note in rows)
+@given(rows=_WELL_FORMED, header=st.sampled_from(["", "r,z\n", "R Z SHARP\n", "# comment\n"]),
+       separator=_SEPARATORS)
+def test_fast_csv_reader_reads_well_formed_files(tmp_path_factory, rows, header, separator):
+    """Well-formed files (any separator, the same on every line; flags,
+    comments, a header) are read by the fast path, with the line reader's
+    result."""
+    text = header + "".join(f"{r!r}{separator}{z!r}{separator + flag if flag else ''}{note}\n"
+                            for r, z, flag, _, note in rows)
     fast, slow = _read_both(tmp_path_factory.mktemp("csv"), text)
     assert fast is not None, text
     np.testing.assert_array_equal(fast[0], slow[0])
