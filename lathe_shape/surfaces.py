@@ -228,7 +228,9 @@ class BSplineSurface(_KernelSurface):
         #: The kind's name: ``bspline``, ``bezier``, ``catmull_rom``, ``quadratic``, ``sor``.
         self.kind = profile.kind
 
-    def _samples(self) -> list[tuple[int, float]]:
+    def _samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """Adaptive ``(segment, t)`` parameters of the reference mesh's
+        rings, in curve order."""
         return bs.sample_adaptive(self.profile.segment_controls, max_angle_deg=self.max_angle_deg)
 
     def _evaluate(self, index: np.ndarray, t: np.ndarray):
@@ -243,9 +245,7 @@ class BSplineSurface(_KernelSurface):
         v = (segment + t) / segments (the exact kernel's texture v). A closed
         curve's last sample repeats its first (v = 1 there). Computed once:
         the reference mesh's rings, and its memory estimate."""
-        samples = self._samples()
-        index = np.array([i for i, _ in samples])
-        t = np.array([t for _, t in samples])
+        index, t = self._samples()
         r, z = self._evaluate(index, t)
         dr, dz = self._derivative(index, t)
         points = np.stack([r, z], axis=1)
@@ -315,7 +315,7 @@ class SorSurface(BSplineSurface):
     """Revolved POV-Ray ``sor``: ``r^2`` a cubic in the height (eqs. 19-20),
     solved by the Method 2 kernel with ``r_squared``."""
 
-    def _samples(self) -> list[tuple[int, float]]:
+    def _samples(self) -> tuple[np.ndarray, np.ndarray]:
         return self.profile.sample_parameters(self.max_angle_deg)
 
     def _evaluate(self, index: np.ndarray, t: np.ndarray):

@@ -29,6 +29,7 @@ clockwise in the (r right, z up) plane, interior on the right; use
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,7 +47,10 @@ __all__ = [
     "control_points",
     "cubic_ranges",
     "adaptive_parameters",
+    "flat_intervals",
+    "unit_tangents",
     "is_closed",
+    "ends_meet",
     "power_coefficients",
     "evaluate",
     "derivative",
@@ -72,7 +76,8 @@ _AREA_WEIGHTS = np.array([[(b - a) / (a + b) if a + b else 0.0 for b in range(4)
 #: Most dense samples of the whole curve for ``to_polyline(method="adaptive")``.
 _DENSE_SAMPLES = 1 << 20
 
-#: Points evaluated at a time by :func:`_eval_global`.
+#: Points evaluated at a time by :func:`_eval_global` (intervals by
+#: :func:`flat_intervals`).
 _EVAL_CHUNK = 1 << 16
 
 #: Samples per segment for the self-intersection and regularity checks.
@@ -186,7 +191,20 @@ def _segments_closed(seg_ctrl: np.ndarray) -> bool:
     """Whether the curve's end equals its start (closed form)."""
     end = seg_ctrl[-1].T @ _BASIS.sum(axis=0)
     start = seg_ctrl[0].T @ _BASIS[0]
-    return bool(np.allclose(end, start, rtol=0, atol=1e-12 * _scale(seg_ctrl)))
+    return ends_meet(start, end, _scale(seg_ctrl))
+
+
+def ends_meet(start: np.ndarray, end: np.ndarray, scale: float) -> bool:
+    """Whether a curve of size ``scale`` ends where it starts: its end
+    points ``(r, z)`` lie within ``1e-12 * scale`` of each other, or within
+    the rounding of their coordinates (16 units in the last place of the
+    largest, as :func:`.crossings.touch_tolerance`). The second is what
+    evaluating the curve (eq. 12) after a kind's conversion (eq. 18) leaves
+    in the ends of a loop that closes exactly: far from the origin it
+    exceeds the first (a curve of size 2 at z = 1e7: 1e-9 against 2e-12)."""
+    start, end = np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64)
+    rounding = 16.0 * np.finfo(np.float64).eps * float(max(np.abs(start).max(), np.abs(end).max()))
+    return bool(np.all(np.abs(end - start) <= 1e-12 * scale + rounding))
 
 
 def validate_curve(seg: np.ndarray, closed: bool, source: str, what: str = "B-spline curve",
@@ -444,34 +462,33 @@ def make_bspline_profile(points: np.ndarray, source: str) -> BSplineProfile:
 # Sampling
 # ---------------------------------------------------------------------------
 
-def _tangent_dir(coeffs: np.ndarray, i: int, t: float, tiny: float) -> np.ndarray:
-    """Unit tangent of segment ``i`` (power coefficients ``coeffs``); at the
-    zero-speed ends of an open curve (speed at most ``tiny``) the limit
-    direction (along the segment's chord) is used."""
-    dr, dz = _tangent_of(coeffs[i], t)
-    v = np.array([float(dr), float(dz)])
-    n = np.linalg.norm(v)
-    if n <= tiny:
-        r0, z0 = _point_of(coeffs[i], 0.0)
-        r1, z1 = _point_of(coeffs[i], 1.0)
-        v = np.array([float(r1 - r0), float(z1 - z0)])
-        n = np.linalg.norm(v)
-    return v / n if n > 0 else v
+def unit_tangents(tangent: np.ndarray, chord: np.ndarray, tiny: float) -> np.ndarray:
+    """Unit tangents from the (n, 2) tangent vectors ``tangent``; where the
+    speed is at most ``tiny`` (the zero-speed ends of an open curve, a
+    disc's centre) the limit direction, the segment's ``chord`` (n, 2), is
+    used instead. A zero vector stays zero."""
+    speed = np.linalg.norm(tangent, axis=1)
+    slow = speed <= tiny
+    direction = np.where(slow[:, None], chord, tangent)
+    length = np.where(slow, np.linalg.norm(chord, axis=1), speed)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(length[:, None] > 0, direction / length[:, None], direction)
 
 
 def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
                     max_error: float | None = None,
-                    max_depth: int = 16) -> list[tuple[int, float]]:
+                    max_depth: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """Adaptive parameter samples for a reference tessellation.
 
-    Every segment's interval [0, 1] is bisected recursively until, on each
-    piece, the tangent turns by at most ``max_angle_deg`` and the curve
-    strays from the chord by at most ``max_error`` (default: 1e-4 of the
-    profile's bounding-box diagonal; checked at the quarter points).
+    Every segment's interval [0, 1] is bisected until, on each piece, the
+    tangent turns by at most ``max_angle_deg`` and the curve strays from
+    the chord by at most ``max_error`` (default: 1e-4 of the profile's
+    bounding-box diagonal; checked at the quarter points), or ``max_depth``
+    bisections are reached (:func:`adaptive_parameters`).
 
-    Returns a list of ``(segment, t)`` in curve order, always holding every
-    segment's ``t = 0`` and the curve's end ``(n_seg - 1, 1.0)`` (for a closed
-    curve that end is the start point again).
+    Returns ``(segment, t)``, two arrays in curve order, always holding
+    every segment's ``t = 0`` and the curve's end ``(n_seg - 1, 1.0)`` (for
+    a closed curve that end is the start point again).
     """
     seg_ctrl = np.asarray(seg_ctrl, dtype=np.float64)
     # Once for the curve (not per sample: that made sampling quadratic)
@@ -480,47 +497,88 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
     if max_error is None:
         max_error = 1e-4 * size
 
-    def point(i: int, t: float) -> np.ndarray:
-        r, z = _point_of(coeffs[i], t)
-        return np.array([float(r), float(z)])
+    def points(index: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.stack(_point_of(coeffs[index], t), axis=1)  # eq. 12
 
-    return adaptive_parameters(len(seg_ctrl), point, lambda i, t: _tangent_dir(coeffs, i, t, 1e-9 * size),
-                               max_angle_deg, max_error, max_depth)
+    def tangents(index: np.ndarray, t: np.ndarray) -> np.ndarray:
+        chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
+        return unit_tangents(np.stack(_tangent_of(coeffs[index], t), axis=1), chord, 1e-9 * size)
+
+    return adaptive_parameters(len(seg_ctrl), points, tangents, max_angle_deg, max_error, max_depth)
 
 
-def adaptive_parameters(n_seg: int, point, tangent, max_angle_deg: float, max_error: float,
-                        max_depth: int = 16) -> list[tuple[int, float]]:
+#: ``(index, t) -> (n, 2)``: points or unit tangents of a curve at the
+#: parameters ``t`` of its segments ``index`` (arrays of one length).
+CurveFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def adaptive_parameters(n_seg: int, points: CurveFunction, tangents: CurveFunction, max_angle_deg: float,
+                        max_error: float, max_depth: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """The bisection of :func:`sample_adaptive` for any curve of ``n_seg``
-    segments: ``point(i, t)`` its (r, z) point, ``tangent(i, t)`` its unit
-    tangent (used by the ``sor`` kind, whose radius is a square root)."""
+    segments: ``points(index, t)`` its (r, z) points, ``tangents(index,
+    t)`` its unit tangents (the ``sor`` kind's radius is a square root).
+
+    Breadth first: each round tests every open interval of every segment at
+    once (:func:`flat_intervals`), keeps the flat ones (and all of them at
+    ``max_depth``) and halves the others; sorting the kept intervals by
+    (segment, start) gives the curve order. The intervals, their test and
+    so the samples are those of a depth-first bisection per segment.
+    """
     cos_max = math.cos(math.radians(max_angle_deg))
+    index = np.arange(n_seg)
+    t0, t1 = np.zeros(n_seg), np.ones(n_seg)
+    kept_index, kept_t = [], []
+    for depth in range(max_depth + 1):
+        if depth == max_depth:
+            flat = np.ones(len(index), dtype=bool)
+        else:
+            flat = flat_intervals(points, tangents, index, t0, t1, cos_max, max_error)
+        kept_index.append(index[flat])
+        kept_t.append(t0[flat])
+        index, t0, t1 = _halves(index[~flat], t0[~flat], t1[~flat])
+        if len(index) == 0:
+            break
+    index, t = np.concatenate(kept_index), np.concatenate(kept_t)
+    order = np.lexsort((t, index))
+    return np.append(index[order], n_seg - 1), np.append(t[order], 1.0)
 
-    def flat(i: int, t0: float, t1: float) -> bool:
-        if float(np.dot(tangent(i, t0), tangent(i, t1))) < cos_max:
-            return False
-        a, b = point(i, t0), point(i, t1)
-        ab = b - a
-        L = np.linalg.norm(ab)
-        for f in (0.25, 0.5, 0.75):
-            m = point(i, t0 + f * (t1 - t0)) - a
-            d = abs(ab[0] * m[1] - ab[1] * m[0]) / L if L > 0 else np.linalg.norm(m)
-            if d > max_error:
-                return False
-        return True
 
-    out: list[tuple[int, float]] = []
-    for i in range(n_seg):
-        stack = [(0.0, 1.0, 0)]
-        while stack:  # depth-first, left piece first: keeps curve order
-            t0, t1, depth = stack.pop()
-            if depth < max_depth and not flat(i, t0, t1):
-                tm = 0.5 * (t0 + t1)
-                stack.append((tm, t1, depth + 1))
-                stack.append((t0, tm, depth + 1))
-            else:
-                out.append((i, t0))
-    out.append((n_seg - 1, 1.0))
-    return out
+def _halves(index: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Both halves of each interval ``[t0, t1]`` of segment ``index``."""
+    middle = 0.5 * (t0 + t1)
+    return np.repeat(index, 2), np.stack([t0, middle], axis=1).ravel(), np.stack([middle, t1], axis=1).ravel()
+
+
+def flat_intervals(points: CurveFunction, tangents: CurveFunction, index: np.ndarray, t0: np.ndarray,
+                   t1: np.ndarray, cos_max: float, max_error: float) -> np.ndarray:
+    """Whether the curve is flat on each interval ``[t0, t1]`` of segment
+    ``index``: its unit tangents at both ends make a cosine of at least
+    ``cos_max``, and its points at the quarters lie within ``max_error`` of
+    the chord (of the start point where the chord has no length).
+    Evaluated :data:`_EVAL_CHUNK` intervals at a time (bounded memory)."""
+    flat = np.empty(len(index), dtype=bool)
+    for start in range(0, len(index), _EVAL_CHUNK):
+        part = slice(start, start + _EVAL_CHUNK)
+        flat[part] = _flat(points, tangents, index[part], t0[part], t1[part], cos_max, max_error)
+    return flat
+
+
+def _flat(points: CurveFunction, tangents: CurveFunction, index: np.ndarray, t0: np.ndarray,
+          t1: np.ndarray, cos_max: float, max_error: float) -> np.ndarray:
+    """:func:`flat_intervals` of one chunk of intervals. (The comparisons
+    are written so that a NaN passes each test, as the scalar test did.)"""
+    turns = np.sum(tangents(index, t0) * tangents(index, t1), axis=1) < cos_max
+    a = points(index, t0)
+    chord = points(index, t1) - a
+    length = np.linalg.norm(chord, axis=1)
+    strays = np.zeros(len(index), dtype=bool)
+    for f in (0.25, 0.5, 0.75):
+        m = points(index, t0 + f * (t1 - t0)) - a
+        cross = np.abs(chord[:, 0] * m[:, 1] - chord[:, 1] * m[:, 0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            distance = np.where(length > 0, cross / length, np.linalg.norm(m, axis=1))
+        strays |= distance > max_error
+    return ~turns & ~strays
 
 
 def to_polyline(seg_ctrl: np.ndarray, n_points: int, method: str = "uniform") -> np.ndarray:

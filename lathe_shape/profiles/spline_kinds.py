@@ -145,9 +145,11 @@ def quadratic_through(points: np.ndarray) -> np.ndarray:
 
 
 def curve_form(start: np.ndarray, end: np.ndarray, scale: float) -> tuple[bool, bool]:
-    """``(loop, on_axis)``: whether the curve's end is its start, and
-    whether both its ends lie on the axis (within ``1e-12 * scale``)."""
-    loop = bool(np.allclose(start, end, rtol=0.0, atol=1e-12 * scale))
+    """``(loop, on_axis)``: whether the curve's end is its start (within
+    ``1e-12 * scale`` or the rounding of their coordinates,
+    :func:`.bspline.ends_meet`), and whether both its ends lie on the axis
+    (within ``1e-12 * scale``)."""
+    loop = bs.ends_meet(start, end, scale)
     on_axis = bool(abs(start[0]) <= 1e-12 * scale and abs(end[0]) <= 1e-12 * scale)
     return loop, on_axis
 

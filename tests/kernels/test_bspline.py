@@ -149,18 +149,155 @@ def test_to_polyline_adaptive_evens_out_turning():
 @pytest.mark.parametrize("pts", [RING, EGG])
 def test_sample_adaptive(pts):
     seg = B.bspline_segments(pts)
-    samples = B.sample_adaptive(seg, max_angle_deg=2.0)
+    index, t = B.sample_adaptive(seg, max_angle_deg=2.0)
     for i in range(len(seg)):
-        assert (i, 0.0) in samples
-    assert samples[-1] == (len(seg) - 1, 1.0)
-    T = np.array([i + t for i, t in samples])
+        assert np.any((index == i) & (t == 0.0))
+    assert (index[-1], t[-1]) == (len(seg) - 1, 1.0)
+    T = index + t
     assert np.all(np.diff(T) > 0)
     # Turning angle between successive chords stays near the bound.
-    pts2 = np.array([np.array(B.evaluate(seg, i, t)).ravel() for i, t in samples])
+    pts2 = np.stack(B.evaluate(seg, index, t), axis=1)
     v = np.diff(pts2, axis=0)
     ang = np.arctan2(v[:, 1], v[:, 0])
     turn = np.degrees(np.abs(np.angle(np.exp(1j * np.diff(ang)))))
     assert np.percentile(turn, 99) < 4.0
+
+
+def _star(n: int = 16) -> np.ndarray:
+    """A closed B-spline star of ``n / 2`` spikes about (3, 0): a curve
+    that turns back and forth many times."""
+    a = 2 * np.pi * np.arange(n) / n
+    radius = np.where(np.arange(n) % 2 == 0, 2.0, 1.0)
+    p = np.stack([3 + radius * np.cos(a), radius * np.sin(a)], axis=1)
+    return np.concatenate([p, p[:1]])
+
+
+def _depth_first_samples(n_seg, points, tangents, max_angle_deg, max_error, max_depth=16):
+    """The sampler as it was before it was vectorised: a depth-first
+    bisection of each segment on its own, one interval at a time."""
+    cos_max = np.cos(np.radians(max_angle_deg))
+
+    def flat(i, t0, t1):
+        def at(f, t):
+            return f(np.array([i]), np.array([t]))[0]
+
+        if float(np.dot(at(tangents, t0), at(tangents, t1))) < cos_max:
+            return False
+        a, b = at(points, t0), at(points, t1)
+        ab = b - a
+        length = np.linalg.norm(ab)
+        for f in (0.25, 0.5, 0.75):
+            m = at(points, t0 + f * (t1 - t0)) - a
+            d = abs(ab[0] * m[1] - ab[1] * m[0]) / length if length > 0 else np.linalg.norm(m)
+            if d > max_error:
+                return False
+        return True
+
+    out = []
+    for i in range(n_seg):
+        stack = [(0.0, 1.0, 0)]
+        while stack:
+            t0, t1, depth = stack.pop()
+            if depth < max_depth and not flat(i, t0, t1):
+                tm = 0.5 * (t0 + t1)
+                stack += [(tm, t1, depth + 1), (t0, tm, depth + 1)]
+            else:
+                out.append((i, t0))
+    out.append((n_seg - 1, 1.0))
+    return np.array([i for i, _ in out]), np.array([t for _, t in out])
+
+
+def _curve_functions(seg):
+    """``points(index, t)`` and ``tangents(index, t)`` of a curve (as
+    :func:`lathe_shape.profiles.bspline.sample_adaptive` builds them)."""
+    def points(index, t):
+        return np.stack(B.evaluate(seg, index, t), axis=1)
+
+    def tangents(index, t):
+        chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
+        return B.unit_tangents(np.stack(B.derivative(seg, index, t), axis=1), chord, 1e-9 * B._scale(seg))
+
+    return points, tangents
+
+
+def _wavy_sor(n: int = 60):
+    """A ``sor`` whose radius waves 1 + 0.3 sin(40 z): 6 waves."""
+    from lathe_shape.profiles.sor import make_sor_profile
+
+    z = np.linspace(0.0, 1.0, n)
+    return make_sor_profile(np.stack([1 + 0.3 * np.sin(40 * z), z], axis=1), "wavy sor")
+
+
+#: B-spline curves of the sampler tests (with :func:`_wavy_sor`), by name.
+SAMPLED_BSPLINES = {"ring": RING, "egg": EGG, "glass12": GLASS12, "star": _star()}
+SAMPLED = [*SAMPLED_BSPLINES, "wavy_sor"]
+
+
+def _sampled(name: str):
+    """``(n_seg, points, tangents, max_error, (index, t))``: a test curve,
+    its curve functions, its chord error and its adaptive samples at 1
+    degree (as the reference mesh takes them)."""
+    if name == "wavy_sor":
+        profile = _wavy_sor()
+
+        def points(index, t):
+            return np.stack(profile.evaluate(index, t), axis=1)
+
+        def tangents(index, t):
+            chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
+            return B.unit_tangents(np.stack(profile.derivative(index, t), axis=1), chord, 0.0)
+
+        return (profile.segment_count, points, tangents, 1e-4 * profile.scale(),
+                profile.sample_parameters(1.0))
+    seg = B.bspline_segments(SAMPLED_BSPLINES[name])
+    return (len(seg), *_curve_functions(seg), 1e-4 * B._scale(seg), B.sample_adaptive(seg, max_angle_deg=1.0))
+
+
+@pytest.mark.parametrize("name", SAMPLED)
+def test_sample_adaptive_equals_the_depth_first_bisection(name):
+    """All segments bisected together in rounds give bit for bit the
+    samples of the former per-segment depth-first bisection."""
+    n_seg, points, tangents, max_error, (index, t) = _sampled(name)
+    want_index, want_t = _depth_first_samples(n_seg, points, tangents, 1.0, max_error)
+    np.testing.assert_array_equal(index, want_index)
+    np.testing.assert_array_equal(t, want_t)
+
+
+def test_sample_adaptive_evaluates_all_segments_at_once():
+    """The curve is evaluated a few times per round of bisection (whole
+    arrays), not once per interval: 40 spikes, thousands of samples."""
+    seg = B.bspline_segments(_star(80))
+    points, tangents = _curve_functions(seg)
+    calls = []
+
+    def counted(f):
+        def wrapped(index, t):
+            calls.append(len(t))
+            return f(index, t)
+        return wrapped
+
+    index, _ = B.adaptive_parameters(len(seg), counted(points), counted(tangents), 1.0, 1e-4 * B._scale(seg))
+    rounds = 16  # max_depth
+    assert len(index) > 10_000
+    assert len(calls) <= 7 * rounds  # two tangents, five points per round
+
+
+@pytest.mark.parametrize("name", SAMPLED)
+def test_sample_adaptive_meets_its_tolerances(name):
+    """Between successive samples the curve stays within the chord error
+    (checked densely here, not only at the quarters) and its tangent
+    turns by at most the angle: the reference mesh's profile is within
+    the sampler's tolerance of the curve."""
+    _, points, tangents, max_error, (index, t) = _sampled(name)
+    i, t0 = index[:-1], t[:-1]
+    t1 = np.where(index[1:] == i, t[1:], 1.0)
+    a, b = points(i, t0), points(i, t1)
+    chord = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    for f in np.linspace(0.0, 1.0, 33):
+        m = points(i, t0 + f * (t1 - t0)) - a
+        assert np.abs(chord[:, 0] * m[:, 1] - chord[:, 1] * m[:, 0]).max() <= 1.05 * max_error
+    cos = np.sum(tangents(i, t0) * tangents(i, t1), axis=1)
+    assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() <= 1.0 + 1e-9
 
 
 # ---------------------------------------------------------------------------

@@ -307,6 +307,50 @@ def test_profile_error_class():
         make_cubic_profile("bezier", _points("0 0, 1 0, 1.2 0.5, 1.3 1.5"), "cup")
 
 
+def _bezier_circle(r: float, z: float) -> np.ndarray:
+    """A bezier loop of four quarter circles of radius 1 about (r, z)
+    whose last control point is its first, bit for bit."""
+    k = 0.5522847498  # the quarter circle's handle length
+    corners = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
+    handles = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+    segments = [[corners[q], corners[q] + k * handles[q], corners[q + 1] - k * handles[q + 1], corners[q + 1]]
+                for q in range(4)]
+    return np.array(segments).reshape(-1, 2) + [r, z]
+
+
+def _profile_text(points: np.ndarray) -> str:
+    return ", ".join(f"{float(r)!r} {float(z)!r}" for r, z in points)
+
+
+@pytest.mark.parametrize("r, z", [(3.0, 0.0), (1e5, 0.0), (3.0, 1e5), (1e6, 1e6), (3.0, 1e7), (1e7, 1e7)])
+def test_closed_bezier_far_from_the_origin_is_a_loop(r, z):
+    """A bezier curve that closes exactly is a loop at any distance from
+    the origin: the rounding that converting and evaluating it leaves in
+    its far coordinates (1e-9 at 1e7) is no gap, though it exceeds 1e-12
+    of its size (it was refused as not closed from about 1e6 on)."""
+    from lathe_shape.profiles.bspline import to_polyline
+    from lathe_shape.profiles.pov import is_open
+
+    points = _bezier_circle(r, z)
+    assert np.array_equal(points[0], points[-1])
+    shape = mi.load_dict({"type": "lathe", "kind": "bezier", "profile": _profile_text(points),
+                          "mesh_segments": 8})
+    assert shape.profile.closed_loop and not shape.profile.open_sheet
+    assert not is_open("bezier", points, "circle")
+    polyline = to_polyline(shape.profile.segment_controls, 33)
+    assert np.array_equal(polyline[0], polyline[-1])
+
+
+@pytest.mark.parametrize("r, z, gap", [(3.0, 0.0, 1e-9), (1e7, 1e7, 1e-5), (3.0, 1e7, 1e-6)])
+def test_open_bezier_far_from_the_origin_is_refused(r, z, gap):
+    """A gap beyond the rounding of the coordinates is still a gap."""
+    points = _bezier_circle(r, z)
+    points[-1, 1] += gap
+    assert points[-1, 1] != points[0, 1]
+    with pytest.raises(RuntimeError, match=re.escape("bezier curve is not closed")):
+        mi.load_dict({"type": "lathe", "kind": "bezier", "profile": _profile_text(points)})
+
+
 @pytest.mark.parametrize("name", sorted(CURVES))
 def test_reference_mesh_lies_on_the_curve_with_the_exact_normals_and_uv(name):
     """Mesh vertices lie on the curve, and their normals and texture
