@@ -8,9 +8,13 @@ too, and they move with the profile (of the object seen, and of the glass
 it is seen through). Across such an outline the camera ray's chain of
 Dirac-delta vertices meets a lathe once more or once less: at one vertex
 ``k >= 1`` the ray grazes a lathe (touches its surface, or clips a polyline
-joint's circle). With ``g(x, theta)`` the distance between that ray, a
-function of the image position ``x`` and of the profile ``theta``, and
-the surface it grazes, the outline is ``g = 0`` and a pixel's gradient
+joint's circle). A crease seen through glass (a polyline joint whose two
+segments' shading normals differ, eq. 10) is an outline too: across it the
+chain's vertex ``k`` moves from one smooth patch of the profile to the
+next, and the ray leaving it turns abruptly; its contact is the joint's
+circle, as for a clipped joint. With ``g(x, theta)`` the distance between
+that ray, a function of the image position ``x`` and of the profile
+``theta``, and the surface it grazes (or the crease's circle), the outline is ``g = 0`` and a pixel's gradient
 gains (docs/method.md, eq. 41)
 
     dI_p = integral over the outline in p of (f_+ - f_-) g_theta / |grad_x g| dl,
@@ -26,9 +30,9 @@ joint circle whose tangent is ``T``).
 The crossings are found on scan lines, ``lines`` per pixel across the rows
 and as many down the columns, each sampled four times per pixel from a
 random offset: where two neighbouring samples' chains meet a different
-sequence of lathes, bisection finds the crossing. A crossing on a
-row stands for ``1 / lines`` of outline length divided by ``|n_x|``, on a
-column by ``|n_y|``; weighted by the balance heuristic between the two,
+sequence of lathes, or of smooth patches of their profiles, bisection finds
+the crossing. A crossing on a row stands for ``1 / lines`` of outline
+length divided by ``|n_x|``, on a column by ``|n_y|``; weighted by the balance heuristic between the two,
 each crossing adds (eq. 42)
 
     W (L_+ - L_-) g_theta / (p lines (|g_x| + |g_y|)),
@@ -162,10 +166,12 @@ def _branch(si: mi.SurfaceInteraction3f, ray: mi.Ray3f, reflect_at: mi.Int32, de
 
 
 @dr.syntax
-def _signature(geometry, lathes: list, ray: mi.Ray3f, reflect_at: mi.Int32, vertices: mi.UInt32) -> mi.UInt32:
-    """A hash of the sequence of lathes that the chains of ``ray`` meet
-    (one loop): it changes across an outline seen through glass, where a
-    lathe is met once more or less, or another lathe is met instead."""
+def _signature(geometry, lathes: list, patches: _Patches, ray: mi.Ray3f, reflect_at: mi.Int32,
+               vertices: mi.UInt32) -> mi.UInt32:
+    """A hash of the sequence of lathes, and of their profiles' smooth
+    patches, that the chains of ``ray`` meet (one loop): it changes across
+    an outline seen through glass, where a lathe is met once more or less,
+    another lathe is met instead, or a hit crosses a crease."""
     signature = dr.zeros(mi.UInt32, dr.width(ray.o))  # Hash of the lathes met so far
     active = dr.full(mi.Bool, True, dr.width(ray.o))  # The chain goes on
     depth = dr.zeros(mi.UInt32, dr.width(ray.o))  # Vertices so far
@@ -173,7 +179,8 @@ def _signature(geometry, lathes: list, ray: mi.Ray3f, reflect_at: mi.Int32, vert
         si = geometry.ray_intersect(ray, active)
         index = _lathe_index(si, lathes)
         on_lathe = active & (index >= 0)
-        signature[on_lathe] = signature * 0x9E3779B1 + mi.UInt32(index + 2)
+        patch = patches.of_hits(index, si.prim_index, on_lathe)
+        signature[on_lathe] = (signature * 0x9E3779B1 + mi.UInt32(index + 2)) * 0x85EBCA6B + patch
         _, bs, go, _ = _branch(si, ray, reflect_at, depth, on_lathe)
         ray = si.spawn_ray(si.to_world(bs.wo))
         depth += 1
@@ -181,15 +188,16 @@ def _signature(geometry, lathes: list, ray: mi.Ray3f, reflect_at: mi.Int32, vert
     return signature
 
 
-def _signatures(geometry, lathes: list, sensor: mi.Sensor, lanes: _Lanes, vertices: int) -> np.ndarray:
+def _signatures(geometry, lathes: list, patches: _Patches, sensor: mi.Sensor, lanes: _Lanes,
+                vertices: int) -> np.ndarray:
     """:func:`_signature` of each scan lane's chain."""
     ray, reflect_at = lanes.rays(sensor)
-    return np.array(_signature(geometry, lathes, ray, reflect_at, dr.opaque(mi.UInt32, vertices)))
+    return np.array(_signature(geometry, lathes, patches, ray, reflect_at, dr.opaque(mi.UInt32, vertices)))
 
 
 @dr.syntax
-def _bisect(geometry, lathes: list, sensor: mi.Sensor, a: _Lanes, b: _Lanes, vertices: int
-            ) -> tuple[_Lanes, _Lanes]:
+def _bisect(geometry, lathes: list, patches: _Patches, sensor: mi.Sensor, a: _Lanes, b: _Lanes,
+            vertices: int) -> tuple[_Lanes, _Lanes]:
     """Bisection of the pairs ``(a, b)`` (same branches, chains meeting
     a different sequence of lathes) to :data:`_BISECTIONS` halvings,
     in one kernel."""
@@ -201,14 +209,14 @@ def _bisect(geometry, lathes: list, sensor: mi.Sensor, a: _Lanes, b: _Lanes, ver
     scale = mi.ScalarVector2f(1.0 / width, 1.0 / height)
     ray_a, reflect_at = a.rays(sensor)
     last = dr.opaque(mi.UInt32, vertices)
-    signature_a = _signature(geometry, lathes, ray_a, reflect_at, last)
+    signature_a = _signature(geometry, lathes, patches, ray_a, reflect_at, last)
     x_a = jit_array(mi.Point2f, a.x.T)  # The side counted as a
     x_b = jit_array(mi.Point2f, b.x.T)  # ... and the other
     step = dr.zeros(mi.UInt32, dr.width(x_a))  # Halvings so far
     while step < _BISECTIONS:
         middle = 0.5 * (x_a + x_b)
         ray, _ = sensor.sample_ray(0.0, 0.5, middle * scale, mi.Point2f(0.5))
-        same = _signature(geometry, lathes, ray, reflect_at, last) == signature_a
+        same = _signature(geometry, lathes, patches, ray, reflect_at, last) == signature_a
         x_a = dr.select(same, middle, x_a)
         x_b = dr.select(same, x_b, middle)
         step += 1
@@ -236,6 +244,49 @@ class _Chain:
     go: np.ndarray
     optional: np.ndarray
     sure: np.ndarray
+
+
+class _Patches:
+    """The smooth patches of the lathes' profiles: per lathe, the patch of
+    each segment, counted from 0 and new after every crease (a polyline
+    joint whose two segments' shading normals differ there, eq. 10); the
+    other kernels' segments are one patch (C2 B-splines)."""
+
+    def __init__(self, lathes: list):
+        self.per_lathe = []
+        for lathe in lathes:
+            profile = lathe.profile
+            patch = np.zeros(profile.segment_count, dtype=np.int64)
+            if kind_of(lathe.surface).kernel != "bspline":
+                # segment k starts a new patch unless it goes on smoothly
+                # from the segment before it (same joint, same normal)
+                linked = profile.segments[1:, 0] == profile.segments[:-1, 1]
+                smooth = linked & np.all(np.abs(profile.normal_start[1:] - profile.normal_end[:-1]) < 1e-9,
+                                         axis=1)
+                patch[1:] = np.cumsum(~smooth)
+                if profile.closed_loop and len(patch) > 1 and patch[-1] > 0:
+                    # a loop's last patch goes on into its first
+                    wrap = np.all(np.abs(profile.normal_start[0] - profile.normal_end[-1]) < 1e-9)
+                    if wrap and profile.segments[0, 0] == profile.segments[-1, 1]:
+                        patch[patch == patch[-1]] = 0
+            self.per_lathe.append(patch)
+        offsets = np.cumsum([0] + [len(p) for p in self.per_lathe])
+        self.offsets = jit_array(mi.UInt32, offsets[:-1])
+        self.patch = jit_array(mi.UInt32, np.concatenate(self.per_lathe + [np.zeros(1, np.int64)]))
+
+    def of_hits(self, index: mi.Int32, prim: mi.UInt32, active: mi.Bool) -> mi.UInt32:
+        """The patch of each lathe hit (``index`` into the lathes, -1 for
+        none: 0)."""
+        start = dr.gather(mi.UInt32, self.offsets, mi.UInt32(dr.maximum(index, 0)), active)
+        return dr.gather(mi.UInt32, self.patch, start + prim, active)
+
+    def of_chain(self, chain: _Chain) -> np.ndarray:
+        """The patch of each vertex of a recorded chain (-1: no lathe)."""
+        out = np.full(chain.lathe.shape, -1, dtype=np.int64)
+        for j, patch in enumerate(self.per_lathe):
+            mine = chain.lathe == j
+            out[mine] = patch[np.minimum(chain.prim[mine].astype(np.int64), len(patch) - 1)]
+        return out
 
 
 @dr.syntax
@@ -393,7 +444,7 @@ def _screen_region(sensor: mi.Sensor, lathes: list) -> tuple[np.ndarray, np.ndar
     return low, np.maximum(high, low)
 
 
-def _scan(sensor: mi.Sensor, geometry, lathes: list, rng: np.random.Generator, lines: int,
+def _scan(sensor: mi.Sensor, geometry, lathes: list, patches: _Patches, rng: np.random.Generator, lines: int,
           vertices: int, reflection_vertices: int) -> tuple[_Lanes, _Lanes]:
     """Pairs of scan lanes ``(a, b)`` on the scan lines whose chains meet
     a different sequence of lathes, bisected. A share of the lines
@@ -417,7 +468,7 @@ def _scan(sensor: mi.Sensor, geometry, lathes: list, rng: np.random.Generator, l
         reflect_at = np.where(rng.uniform(size=count) < _REFLECTING_SHARE,
                               rng.integers(0, reflection_vertices, count), -1)
         scan = _Lanes(positions.reshape(-1, 2), np.repeat(reflect_at, along.shape[1]))
-        signatures = _signatures(geometry, lathes, sensor, scan, vertices).reshape(along.shape)
+        signatures = _signatures(geometry, lathes, patches, sensor, scan, vertices).reshape(along.shape)
         # (each line's last sample starts no pair)
         change = np.concatenate([signatures[:, 1:] != signatures[:, :-1], np.zeros((count, 1), bool)], 1)
         first = np.flatnonzero(change.ravel())
@@ -429,20 +480,23 @@ def _scan(sensor: mi.Sensor, geometry, lathes: list, rng: np.random.Generator, l
     b = a.at(np.concatenate([pair[1].x for pair in pairs]))
     if len(a.x) == 0:
         return a, b
-    a, b = _bisect(geometry, lathes, sensor, a, b, vertices)
+    a, b = _bisect(geometry, lathes, patches, sensor, a, b, vertices)
     return a, b
 
 
-def _first_difference(chain_a: _Chain, chain_b: _Chain) -> np.ndarray:
-    """Per lane, the first vertex where the two chains part (-1: none)."""
+def _first_difference(chain_a: _Chain, chain_b: _Chain, patches: _Patches) -> np.ndarray:
+    """Per lane, the first vertex where the two chains part (-1: none):
+    another lathe or none, a hit much further, or a hit across a crease."""
     vertices, lanes = chain_a.t.shape
+    patch_a, patch_b = patches.of_chain(chain_a), patches.of_chain(chain_b)
     k = np.full(lanes, -1)
     going = np.ones(lanes, dtype=bool)
     for v in range(vertices):
         ta, tb = chain_a.t[v], chain_b.t[v]
         with np.errstate(invalid="ignore"):
             jump = np.abs(ta - tb) > _PARTING * np.minimum(ta, tb) + 1e-6
-        differ = (chain_a.lathe[v] != chain_b.lathe[v]) | (np.isfinite(ta) != np.isfinite(tb))
+        differ = ((chain_a.lathe[v] != chain_b.lathe[v]) | (np.isfinite(ta) != np.isfinite(tb))
+                  | (patch_a[v] != patch_b[v]))
         parted = going & (k < 0) & (differ | (np.isfinite(ta) & jump))
         k[parted] = v
         going &= chain_a.go[v] & chain_b.go[v]
@@ -524,12 +578,13 @@ def glass_outline_crossings(integrator, scene: mi.Scene, sensor: mi.Sensor, seed
     rng = np.random.default_rng([seed, 7727])
     with dr.suspend_grad():
         reflection_vertices = min(vertices, _REFLECTION_VERTICES)
-        a, b = _scan(sensor, geometry, lathes, rng, lines, vertices, reflection_vertices)
+        patches = _Patches(lathes)
+        a, b = _scan(sensor, geometry, lathes, patches, rng, lines, vertices, reflection_vertices)
         if len(a.x) == 0:
             return GlassCrossings.none()
         chain_a = _chain(geometry, lathes, sensor, a, vertices)
         chain_b = _chain(geometry, lathes, sensor, b, vertices)
-        k = _first_difference(chain_a, chain_b)
+        k = _first_difference(chain_a, chain_b, patches)
         # The side that meets the grazed lathe (the nearer hit at vertex k)
         lanes = np.arange(len(a.x))
         kk = np.maximum(k, 0)
@@ -576,6 +631,13 @@ def glass_outline_crossings(integrator, scene: mi.Scene, sensor: mi.Sensor, seed
         grad_g = np.stack([g[0] - g[1], g[2] - g[3]], axis=1) / (2 * _IMAGE_STEP)
         # (a shifted chain that ended before vertex k: another outline within the step)
         grad_g[~np.isfinite(grad_g).all(axis=1)] = 0.0
+        # The side rays of eq. 42 (a tenth of a pixel either way along
+        # grad g) must part at vertex k themselves: where another outline
+        # lies between them, their difference is not this one's (dropped)
+        unit = grad_g / np.maximum(np.linalg.norm(grad_g, axis=1, keepdims=True), 1e-30)
+        side_a = _chain(geometry, lathes, sensor, crossing.at(crossing.x - _EPSILON * unit), vertices)
+        side_b = _chain(geometry, lathes, sensor, crossing.at(crossing.x + _EPSILON * unit), vertices)
+        grad_g[_first_difference(side_a, side_b, patches) != k_c] = 0.0
     scale = 1.0 / (lines * np.maximum(probability[chosen], 1e-30))
     return GlassCrossings(crossing, scale, k_c, lathe_of[keep], seg[keep], u[keep], phi[keep], normal[keep],
                           t_star[keep], grad_g, q[keep], len(a.x), len(a.x) - len(chosen))

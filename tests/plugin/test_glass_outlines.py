@@ -24,12 +24,14 @@ import numpy as np
 import pytest
 
 from lathe_shape.plugin.glass_outlines import (
+    _Patches,
     glass_outline_backward,
     glass_outline_crossings,
     glass_outline_forward,
 )
-from lathe_shape.tools.diff_scenes import straw_scene
-from lathe_shape.tools.gradients import finite_difference, forward_gradient
+from lathe_shape.plugin.shape import scene_lathes
+from lathe_shape.tools.diff_scenes import glass_scene, straw_scene
+from lathe_shape.tools.gradients import finite_difference, forward_gradient, glass_gradient
 
 pytestmark = pytest.mark.slow
 
@@ -205,3 +207,45 @@ def test_paths_from_a_vertex_keep_the_camera_path_depth():
         radiance = np.array(integrator.sample_from(scene, sampler, ray, mi.UInt32(depth)))
         assert (radiance[:, 0] > 0.0).all() if lit else (radiance[:, 0] == 0.0).all()
         np.testing.assert_allclose(radiance[:, 1], 0.5, rtol=1e-6)
+
+
+def test_smooth_patches_of_a_profile():
+    """The patches whose changes the scan looks for: a new one after every
+    crease (a joint turning more than ``crease_angle``, or flagged sharp),
+    none at a smoothly shaded joint; a closed loop's last patch goes on
+    into its first where the loop closes smoothly."""
+    def patches(profile: str, **extra) -> list[int]:
+        scene = mi.load_dict({"type": "scene", "lathe": {"type": "lathe", "profile": profile, **extra}})
+        return _Patches(scene_lathes(scene)).per_lathe[0].tolist()
+
+    # (the bottom, a 90 degree corner, two 9.5 degree bends, a 90 degree corner, the top)
+    assert patches("0 0, 1 0, 1 1, 0.9 1.6, 0.9 2, 0 2") == [0, 1, 1, 1, 2]
+    assert patches("0 0, 1 0, 1 1, 1.05 1.5, 0 1.5") == [0, 1, 1, 2]  # (the bend: 5.7 degrees)
+    assert patches("0 0, 1 0, 1 1, 1.05 1.5, 0 1.5", crease_angle=0.0) == [0, 1, 2, 3]
+    assert patches("0 0, 1 0, 1 1 1, 1.05 1.5, 0 1.5") == [0, 1, 2, 3]  # (flagged sharp)
+    # A closed loop (a torus-like ring of 12 points, every joint 30 degrees):
+    # smooth all round at 45 degrees, one patch
+    ring = ", ".join(f"{2 + 0.5 * np.cos(a):.6f} {0.5 * np.sin(a):.6f}"
+                     for a in -np.arange(13) * np.pi / 6)  # (the first point again: closed)
+    assert set(patches(ring, crease_angle=45.0)) == {0}
+    assert patches(ring, crease_angle=20.0) == list(range(12))
+
+
+def test_crease_seen_through_glass(tmp_path):
+    """A solid glass puck (square corners: creases) seen from the side and
+    above: its bottom edge, seen through the top and the side, moves
+    the image discontinuously with the corner point. Measured (48x48, h =
+    0.01, 128 spp, seeds 1-2, 2026-12-04), bottom and top corner r:
+    correlation 0.97 (0.99-1.00 without the 2% of pixels where AD and FD
+    differ most), interior sums within 1-10% of the FD; with the crossings
+    of lathes alone (before): correlation 0.92-0.93, sums 42-79% off."""
+    profile = tmp_path / "puck.csv"
+    profile.write_text("0 0\n0.6 0\n0.6 0.3\n0 0.3\n")
+    scene = glass_scene(str(profile), resolution=48, height=0.6)
+    lathe = scene_lathes(scene)[0]
+    for index in (2, 4):  # (bottom corner r, top corner r)
+        check = glass_gradient(scene, lathe, index, h=0.01, spp=128, seed=1)
+        ad, fd = check.trimmed()
+        assert abs(fd.sum()) > 300.0
+        assert check.correlation() > 0.96, index
+        assert abs(ad.sum() - fd.sum()) < 0.15 * abs(fd.sum()), (index, ad.sum(), fd.sum())

@@ -109,20 +109,21 @@ def test_csv_separators(tmp_path):
     """Commas, semicolons or white space, one of them per file: a decimal
     comma among semicolons (``1,5;0``) was read as the point (1, 5) with a
     sharp flag 0, and a stray semicolon among commas passed unnoticed."""
-    for name, text in (("commas", "0,0\n1.5,0\n1.2,1\n0,1\n"), ("semicolons", "r;z\n0;0\n1.5;0\n1.2;1\n0;1\n"),
+    for name, text in (("commas", "0,0\n1.5,0\n1.2,1\n0,1\n"),
+                       ("semicolons", "r;z\n0;0\n1.5;0\n1.2;1\n0;1\n"),
                        ("spaces", "0 0\n1.5  0\n1.2\t1\n0 1\n")):
         path = tmp_path / f"{name}.csv"
         path.write_text(text)
         assert read_profile_csv(path)[0].tolist() == [[0, 0], [1.5, 0], [1.2, 1], [0, 1]], name
     euro = tmp_path / "euro.csv"
     euro.write_text("r;z\n0;0\n1,5;0\n1,2;1\n0;1\n")
-    with pytest.raises(ProfileError, match=r"euro\.csv, line 3: a decimal comma \('1,5;0'\); numbers are written "
-                                           r"with a point \(1\.5, not 1,5\)"):
+    with pytest.raises(ProfileError, match=r"euro\.csv, line 3: a decimal comma \('1,5;0'\); numbers are "
+                                           r"written with a point \(1\.5, not 1,5\)"):
         read_profile_csv(euro)
     mixed = tmp_path / "mixed.csv"
     mixed.write_text("r,z\n0,0\n1.5,0\n1.2;1\n0,1\n")
-    with pytest.raises(ProfileError, match=r"mixed\.csv, line 4: columns separated by semicolons, where line 2 "
-                                           r"separates them by commas: use one separator"):
+    with pytest.raises(ProfileError, match=r"mixed\.csv, line 4: columns separated by semicolons, where "
+                                           r"line 2 separates them by commas: use one separator"):
         read_profile_csv(mixed)
 
 
