@@ -14,7 +14,7 @@ import mitsuba as mi
 
 from ..kernels.common import VariantStruct
 from .camera_chain import chain_vertex
-from .caustic_paths import CausticTracer, caustic_weight, on_lathe, pure_delta
+from .caustic_paths import CausticTracer, blocks_shadow_rays, caustic_weight, on_lathe, pure_delta
 from .deferred_solves import DeferredChainSolves
 
 __all__ = ["CausticPath", "caustic_emitter_factor", "caustic_vertex", "start_caustic_path"]
@@ -23,23 +23,26 @@ __all__ = ["CausticPath", "caustic_emitter_factor", "caustic_vertex", "start_cau
 class CausticPath(metaclass=VariantStruct):
     """Per camera path (eqs. 32 and 40): ``open``, the path so far is
     camera, diffuse ``D``, then Dirac-delta vertices only; ``chain``, those
-    vertices after ``D``; ``density``, path tracing's density of it at
-    ``D``; ``camera_chain``, the path so far is camera, then Dirac deltas on
-    the camera chain's fixed branches; ``camera_d``, its camera ray
-    direction; ``camera_branch``, its branch probabilities' product;
-    ``d_through``, ``D`` was reached through such a chain, of
-    ``d_vertices`` vertices, ``D`` at ``d_p`` with geometric normal ``d_n``
-    on ``d_shape``."""
+    vertices after ``D``; ``blocking``, one of them is a vertex that the
+    path tracer's shadow rays do not cross (eq. 32's class needs one:
+    :func:`~lathe_shape.plugin.caustic_paths.blocks_shadow_rays`);
+    ``density``, path tracing's density of it at ``D``; ``camera_chain``,
+    the path so far is camera, then Dirac deltas on the camera chain's
+    fixed branches; ``camera_d``, its camera ray direction;
+    ``camera_branch``, its branch probabilities' product; ``d_through``,
+    ``D`` was reached through such a chain, of ``d_vertices`` vertices,
+    ``D`` at ``d_p`` with geometric normal ``d_n`` on ``d_shape``."""
 
-    _FIELDS = {"open": "Bool", "chain": "UInt32", "density": "Float", "camera_chain": "Bool",
-               "camera_d": "Vector3f", "camera_branch": "Float", "d_through": "Bool", "d_vertices": "UInt32",
-               "d_p": "Point3f", "d_n": "Normal3f", "d_shape": "ShapePtr"}
+    _FIELDS = {"open": "Bool", "chain": "UInt32", "blocking": "Bool", "density": "Float",
+               "camera_chain": "Bool", "camera_d": "Vector3f", "camera_branch": "Float", "d_through": "Bool",
+               "d_vertices": "UInt32", "d_p": "Point3f", "d_n": "Normal3f", "d_shape": "ShapePtr"}
 
-    def __init__(self, open=None, chain=None, density=None, camera_chain=None, camera_d=None,
+    def __init__(self, open=None, chain=None, blocking=None, density=None, camera_chain=None, camera_d=None,
                  camera_branch=None, d_through=None, d_vertices=None, d_p=None, d_n=None,
                  d_shape=None) -> None:
         self.open = mi.Bool(False) if open is None else open
         self.chain = mi.UInt32(0) if chain is None else chain
+        self.blocking = mi.Bool(False) if blocking is None else blocking
         self.density = mi.Float(0.0) if density is None else density
         self.camera_chain = mi.Bool(True) if camera_chain is None else camera_chain
         self.camera_d = mi.Vector3f(0.0) if camera_d is None else camera_d
@@ -69,7 +72,9 @@ def caustic_emitter_factor(tracer: CausticTracer, deferred: DeferredChainSolves,
     contribution ``value`` is recorded in ``deferred``, solved and added
     after the render kernel (deferred_solves.py), and the factor is 0."""
     factor = mi.Float(1.0)
-    caustic = seen & path.open & (path.chain >= 1) & (path.chain <= tracer.max_chain)
+    # (blocking: a chain of null crossings alone is emitter sampling's too,
+    # in lathe_volpath: no caustic path)
+    caustic = seen & path.open & path.blocking & (path.chain >= 1) & (path.chain <= tracer.max_chain)
     flags = ds.emitter.flags()
     surface = caustic & mi.has_flag(flags, mi.EmitterFlags.Surface)
     environment = (caustic & escaped & mi.has_flag(flags, mi.EmitterFlags.Infinite)
@@ -135,6 +140,9 @@ def caustic_vertex(tracer: CausticTracer, path: CausticPath, alive: mi.Bool, con
         camera_chain &= delta_here & ~bad_in & keeps_chain & chain_vertex(si, cos_in_geo, bs, wo_world)
         # (the chain before D only: the deltas after it cancel in eq. 32)
         camera_branch = dr.select(camera_chain, camera_branch * bs.pdf, camera_branch)
-    return CausticPath(alive & (at_d | (path.open & delta_here)), dr.select(at_d, 0, path.chain + 1), density,
-                       camera_chain & alive, path.camera_d, camera_branch, d_through, d_vertices, d_p, d_n,
-                       d_shape)
+    # (the same rule as the light tracer's: blocks_shadow_rays)
+    blocking = dr.select(at_d, False,
+                         path.blocking | blocks_shadow_rays(bs.sampled_type, tracer.nee_through_null))
+    return CausticPath(alive & (at_d | (path.open & delta_here)), dr.select(at_d, 0, path.chain + 1),
+                       blocking, density, camera_chain & alive, path.camera_d, camera_branch, d_through,
+                       d_vertices, d_p, d_n, d_shape)

@@ -15,7 +15,10 @@ importance sampling (the power heuristic) and nothing is counted twice:
   with ``D`` the camera ray's first hit, a surface that is neither an exact
   lathe nor a pure Dirac delta and sampled with its smooth lobes; ``S_1 ...
   S_k`` (``1 <= k <= max_chain``) surfaces whose BSDF is pure Dirac
-  delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``); and the
+  delta (``dielectric``, ``thindielectric``, ``conductor``, ``null``), at
+  least one of them a vertex that path tracing's shadow rays cannot cross
+  (:func:`blocks_shadow_rays`: in ``lathe_volpath`` not every one a null
+  crossing, which emitter sampling samples); and the
   light an area emitter, a point, spot or directional light or the
   environment. Also ``camera -> S'_1 ... S'_m -> D -> ...``: ``D`` seen
   through Dirac deltas, joined to the camera along the chain that
@@ -25,7 +28,9 @@ importance sampling (the power heuristic) and nothing is counted twice:
   generalized geometry term, which cancels in their ratio: eq. 32 of
   docs/method.md needs only the camera's and the BSDF's densities at
   ``D`` and the light's at ``L``. Path tracing cannot sample a point or
-  spot light's caustic at all: there the light tracer's weight is 1.
+  spot light's caustic at all: there the light tracer's weight is 1. (Its
+  emitter sampling cannot sample a caustic path either: the chain holds a
+  vertex its shadow rays do not cross.)
 
 The light tracer aims its particles at the lathes: directions are drawn
 uniformly in the cone from the light point around one of a few spheres that
@@ -58,8 +63,8 @@ from .integrator_base import contradicts, sample_with_fallback, with_geometric_f
 from .line_walk import start_walk
 from .media_segments import segment_transmittance
 
-__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "caustic_weight", "disk_pdf", "on_lathe",
-           "pure_delta"]
+__all__ = ["CausticTracer", "aim_pdf", "aim_spheres", "blocks_shadow_rays", "caustic_weight", "disk_pdf",
+           "on_lathe", "pure_delta"]
 
 #: Margin of the aiming spheres over the lathes' tessellated profiles (a
 #: B-spline's curve may bulge past its points between them).
@@ -83,6 +88,21 @@ def jit_array(kind: type, values) -> object:
 def pure_delta(bsdf: mi.BSDFPtr) -> mi.Bool:
     """Whether ``bsdf`` has Dirac delta lobes only (a chain vertex)."""
     return ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+
+
+def blocks_shadow_rays(sampled_type: mi.UInt32, nee_through_null: bool) -> mi.Bool:
+    """Whether a chain vertex sampled as ``sampled_type`` is one that the
+    path tracer's shadow rays cannot cross (eq. 32: a caustic path needs
+    one between ``D`` and the light, else emitter sampling samples it too).
+    In ``lathe_path`` (``nee_through_null`` false) every vertex: its shadow
+    rays stop at every surface, as Mitsuba's ``path``'s. In
+    ``lathe_volpath`` every vertex but a null crossing (sampled type
+    ``Null``: a ``null`` BSDF, a ``thindielectric``'s transmission), which
+    its shadow rays cross, weighted by ``eval_null_transmission``, as
+    Mitsuba's ``volpath``'s."""
+    if not nee_through_null:
+        return mi.Bool(True)
+    return ~mi.has_flag(sampled_type, mi.BSDFFlags.Null)
 
 
 def on_lathe(lathes: list, si: mi.SurfaceInteraction3f) -> mi.Bool:
@@ -253,12 +273,18 @@ class CausticTracer:
 
     def __init__(self, scene: mi.Scene, sensor: mi.Sensor, lathes: list, max_chain: int,
                  normal_check: str, max_vertices: int | None = None, chain_share: float = 0.3,
-                 media: bool = False) -> None:
+                 media: bool = False, nee_through_null: bool = False) -> None:
         self.lathes = lathes
         #: Whether the particles and the camera connections carry the
         #: transmittance of the homogeneous media they cross (``lathe_volpath``;
         #: the camera and the lights outside every medium).
         self.media = media
+        #: Whether the path tracer's shadow rays cross ``null`` surfaces
+        #: (``lathe_volpath``, as Mitsuba's ``volpath``): a path whose chain
+        #: from ``D`` to the light holds null crossings alone is then sampled
+        #: by emitter sampling, and is no caustic path
+        #: (:func:`blocks_shadow_rays`).
+        self.nee_through_null = nee_through_null
         #: The sensor's pinhole camera (eq. 32).
         self.camera = PinholeCamera(sensor)
         #: Most Dirac-delta vertices between D and the light, and between
@@ -518,6 +544,7 @@ class CausticTracer:
         ray = origin.spawn_ray(d)                 # Current ray of the particle
         walk = start_walk(size)                   # Its line and last lathe crossing
         chain = mi.UInt32(0)                      # Specular vertices passed so far
+        blocking = dr.zeros(mi.Bool, size)        # ... one of them not a vertex shadow rays cross
         active = dr.max(beta) > 0.0               # Particles still going through glass
         landed = dr.zeros(mi.Bool, size)          # Particles that reached a diffuse D
         si_d = dr.zeros(mi.SurfaceInteraction3f, size)  # ... that D
@@ -542,8 +569,13 @@ class CausticTracer:
                 # Eq. 44: the unscattered part of the light, exp(-sigma_t l)
                 # of the segment just walked (scattered light is path traced)
                 beta[valid] *= segment_transmittance(medium, ray.o, si.t, valid)
-            # D: the first smooth surface after at least one specular vertex
+            # D: the first smooth surface after at least one specular vertex,
+            # one of them a vertex that path tracing's shadow rays do not cross
+            # (eq. 32; else its emitter sampling samples the path: a point light
+            # under a null or thindielectric sheet in lathe_volpath, counted twice)
             lands = valid & ~delta & (chain >= 1) & ~on_lathe(self.lathes, si)
+            if dr.hint(self.nee_through_null, mode="scalar"):
+                lands &= blocking
             landed |= lands
             si_d[lands] = si
             chain_d[lands] = chain
@@ -582,6 +614,8 @@ class CausticTracer:
             correction = adjoint_correction(mi.Frame3f.cos_theta(si.wi), cos_in_geo,
                                             mi.Frame3f.cos_theta(bs.wo), dr.dot(si.n, wo_world))
             beta[active] *= weight * correction
+            if dr.hint(self.nee_through_null, mode="scalar"):
+                blocking |= active & blocks_shadow_rays(bs.sampled_type, True)
             if dr.hint(self.media, mode="scalar"):
                 medium[active & si.is_medium_transition()] = si.target_medium(wo_world)
             ray = si.spawn_ray(wo_world)

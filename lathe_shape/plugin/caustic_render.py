@@ -79,7 +79,8 @@ def caustic_setup(integrator, settings: CausticSettings, scene: mi.Scene, sensor
     """The caustic tracer of ``integrator``'s render of ``scene`` through
     ``sensor`` and ``""`` or, where caustics are off or unsupported,
     ``None`` and why. ``media``: the particles and connections carry the
-    transmittance of the media they cross (``lathe_volpath``)."""
+    transmittance of the media they cross, and the path tracer's shadow
+    rays cross ``null`` surfaces (``lathe_volpath``)."""
     if not settings.enabled:
         return None, "off"
     if not mi.is_rgb:
@@ -99,7 +100,7 @@ def caustic_setup(integrator, settings: CausticSettings, scene: mi.Scene, sensor
     vertices = chain_length_limit(depth, 1 << 30)  # (both chains together)
     geometry = integrator.geometry(scene)
     tracer = CausticTracer(scene, sensor, geometry.lathes, chain, normal_check, vertices,
-                           settings.camera_chains, media=media)
+                           settings.camera_chains, media=media, nee_through_null=media)
     return (tracer, "") if tracer.active else (None, NOTHING_TO_TRACE)
 
 
