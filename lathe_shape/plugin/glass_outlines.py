@@ -249,8 +249,10 @@ class _Chain:
 class _Patches:
     """The smooth patches of the lathes' profiles: per lathe, the patch of
     each segment, counted from 0 and new after every crease (a polyline
-    joint whose two segments' shading normals differ there, eq. 10); the
-    other kernels' segments are one patch (C2 B-splines)."""
+    joint whose two segments' shading normals differ there, eq. 10). The
+    curves of the B-spline kernel are one patch each: a B-spline is C2; the
+    corners of a ``bezier`` or ``catmull_rom`` curve are left out, as their
+    contact (a joint circle) is placed on polylines only (:func:`_contacts`)."""
 
     def __init__(self, lathes: list):
         self.per_lathe = []

@@ -10,10 +10,16 @@ the user's points: the attached hits (lathe_shape/kernels/attached.py)
 gather their coordinates through them, and the gradients land on the
 user's points.
 
-Closed profiles given in the ``last == first`` form: the canonical profile
-refers to the first point only, so the gradient of the repeated last point
-is zero; an update must keep the two equal (else it is refused as an open
-profile, like a file would be).
+Closed polyline and B-spline profiles given in the ``last == first`` form:
+the canonical profile refers to the first point only, in either orientation
+of the list, so the gradient of the repeated last point (the closing copy)
+is zero. An update's value of the copy is not read: the copy follows the
+first point (moving the copy alone is accepted and changes nothing; the
+parameter keeps the value given). The cubic kinds (``bezier``,
+``catmull_rom``, ``quadratic``) have no closing copy: every point given
+is read, a loop's repeated points each get their own share of the
+gradient, and an update that moves one of them alone opens the curve and
+is refused.
 """
 
 from __future__ import annotations
@@ -178,7 +184,10 @@ def _bspline_controls(given: ProfileInput, profile) -> np.ndarray:
     if not np.array_equal(profile.points, given.points):
         index = index[::-1]  # the profile was reversed to run clockwise
     if profile.closed_loop:
-        q = index[:-1]
+        # The loop drops the profile's last point, the repeat of its first.
+        # Reversed, the first is the user's closing copy (n - 1): the
+        # surface reads (and the gradient goes to) the user's first point.
+        q = np.where(index[:-1] == n - 1, 0, index[:-1])
         seg = q[(np.arange(len(q))[:, None] + np.arange(4)[None, :]) % len(q)]
     else:
         q = np.concatenate([index[:1], index[:1], index, index[-1:], index[-1:]])

@@ -463,12 +463,16 @@ class LatheShape(mi.Mesh):
         if not hasattr(self, "profile_points"):
             # First traversal (from __init__): the loaded points.
             self.profile_points = mi.Float(self.surface.given.points.ravel().astype(np.float32))
+            self._accepted_points = mi.Float(self.profile_points)
         cb.put("points", self.profile_points, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
 
     def parameters_changed(self, keys: list[str]) -> None:
         """A new ``points`` value re-validates the profile and rebuilds the
         kernel data and the reference mesh; an invalid one raises the loading
-        error and leaves the previous profile (and parameter value) in place."""
+        error and leaves the previous profile in place, and the parameter
+        holds again the variable accepted last (the same Dr.Jit variable,
+        attached to AD as it was), so that an optimisation that catches the
+        error can go on."""
         edited = [key for key in keys if key in MESH_BUFFERS]
         if edited and not getattr(self, "_writing_mesh", False):
             # Edited from outside (mi.traverse): put the mesh back, refuse.
@@ -493,10 +497,14 @@ class LatheShape(mi.Mesh):
             surface = rebuild_surface(given, self.profile_points.numpy(), who)
             check_mesh_budget(_ring_bound(surface, self.reference), self.mesh_segments, who)
         except ValueError:
-            # Keep the previous profile: its value goes back into the parameter.
-            previous = mi.Float(given.points.ravel().astype(np.float32))
-            mi.set_property(self.profile_points, previous)
+            # Keep the previous profile: its value goes back into the parameter,
+            # the very variable accepted last (its AD variable included: a
+            # fresh, detached copy left the next render unattached, and an
+            # optimiser that caught the error could not go on).
+            mi.set_property(self.profile_points, self._accepted_points)
             raise
+        # The same JIT and AD variables as the parameter, for a later refusal.
+        self._accepted_points = mi.Float(self.profile_points)
         self.surface = surface
         self.profile = surface.profile
         self._index = None

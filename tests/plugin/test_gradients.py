@@ -488,3 +488,110 @@ def test_a_closed_loops_points_on_the_axis_are_free(kind):
     solid = lathe_scene(kind=kind, resolution=8)
     assert np.array(profile_index(scene_lathes(solid)[0].surface).held).tolist() == [
         True, False, False, False, False, False, True]
+
+
+#: A ring (a closed B-spline with its first point repeated last), written
+#: clockwise and counter-clockwise from the same first point.
+RING_CLOCKWISE = "0.5 0, 0.5 1, 1 1, 1 0, 0.5 0"
+RING_COUNTER_CLOCKWISE = "0.5 0, 1 0, 1 1, 0.5 1, 0.5 0"
+
+
+@pytest.mark.parametrize("profile", [RING_CLOCKWISE, RING_COUNTER_CLOCKWISE], ids=["cw", "ccw"])
+def test_closed_bspline_first_point_drives_the_curve_in_either_orientation(profile):
+    """The attached curve's derivative with respect to every coordinate of
+    a closed B-spline equals a float64 central difference of the curve
+    rebuilt from moved points (the first point moves its closing copy with
+    it, as an update does), and the copy's derivative is zero. Written
+    counter-clockwise (reversed to run clockwise), the index map once kept
+    the copy and dropped the first point: the first point's derivative was
+    zero and the copy took it, so Adam never moved the first point."""
+    from lathe_shape.kernels.attached import profile_point
+    from lathe_shape.profiles import bspline as bs
+
+    lathe = mi.load_dict({"type": "lathe", "kind": "bspline", "reference": "proxy", "profile": profile})
+    points = np.array([[float(v) for v in p.split()] for p in profile.split(",")])
+    n_seg = lathe.profile.segment_count
+    seg = np.repeat(np.arange(n_seg), 5)
+    u = np.tile(np.linspace(0.05, 0.95, 5), n_seg)
+
+    def curve(coordinate, shift):
+        moved = points.copy()
+        if coordinate < points.size - 2:  # (the copy is not read: it follows the first point)
+            moved.flat[coordinate] += shift
+            moved[-1] = moved[0]
+        return np.array(bs.evaluate(bs.make_bspline_profile(moved, "test").segment_controls, seg, u))
+
+    h = 1e-4
+    for coordinate in range(points.size):
+        value = mi.Float(lathe.profile_points)
+        dr.enable_grad(value)
+        r, z = profile_point(value, lathe.profile_index, "bspline", mi.UInt32(seg), mi.Float(u))
+        dr.set_grad(value, mi.Float(np.eye(points.size, dtype=np.float32)[coordinate]))
+        derivative = np.stack([np.array(g) for g in dr.forward_to(r, z)])
+        difference = (curve(coordinate, h) - curve(coordinate, -h)) / (2 * h)
+        if coordinate < 2:
+            assert np.abs(difference).max() > 0.1  # the first point moves the curve
+        np.testing.assert_allclose(derivative, difference, atol=1e-5, err_msg=f"coordinate {coordinate}")
+
+
+def test_closed_bspline_gradient_lands_on_the_first_point_in_either_orientation():
+    """The same ring rendered from the clockwise and the counter-clockwise
+    list (the same canonical curve, the same image): the gradients are the
+    same per point, the first point's included, and the copies' are zero."""
+    gradients = {}
+    for name, profile in (("cw", RING_CLOCKWISE), ("ccw", RING_COUNTER_CLOCKWISE)):
+        scene = lathe_scene(profile=profile, kind="bspline", resolution=16, reference="proxy")
+        params, key = _points_params(scene)
+        value = params[key]
+        dr.enable_grad(value)
+        params.update()
+        image = mi.render(scene, params, spp=4, seed=1)
+        dr.backward(dr.sum(image, axis=None))
+        gradients[name] = np.array(dr.grad(value)).reshape(-1, 2)
+    cw, ccw = gradients["cw"], gradients["ccw"]
+    assert np.abs(cw[0]).max() > 0.5  # the first point moves the image
+    assert np.all(cw[-1] == 0.0) and np.all(ccw[-1] == 0.0)
+    # ccw lists the points 0, 3, 2, 1 of cw (and the copy)
+    np.testing.assert_allclose(ccw[[0, 3, 2, 1]], cw[:4], rtol=1e-3, atol=1e-3 * np.abs(cw).max())
+
+
+def test_refused_update_keeps_the_optimised_variable_attached():
+    """An optimiser's step that the profile refuses (it intersects itself)
+    raises, and the parameter goes back to the variable accepted before,
+    still attached to AD: the next render differentiates, with the same
+    gradient as before the refused step (once, the value went back as a
+    fresh, detached copy and dr.backward failed with Dr.Jit's "does not
+    depend on the input variable(s)")."""
+    scene = lathe_scene(resolution=16, reference="proxy")
+    params, key = _points_params(scene)
+    optimizer = mi.ad.Adam(lr=0.05)
+    optimizer[key] = params[key]
+    params.update(optimizer)
+    accepted = mi.Float(params[key])  # (the same JIT and AD variables)
+    assert dr.grad_enabled(accepted)
+
+    def gradient():
+        dr.clear_grad(accepted)
+        image = mi.render(scene, params, spp=4, seed=2)
+        dr.backward(dr.mean(image, axis=None))
+        return np.array(dr.grad(accepted))
+
+    before = gradient()
+    assert np.abs(before).max() > 0.0
+    bad = np.array(params[key])
+    bad[8:10] = [1.0, 0.2]  # (0.6, 1.0) dragged below the bowl: self-intersecting
+    optimizer[key] = mi.Float(bad)
+    with pytest.raises(ProfileError, match="intersects itself"):
+        params.update(optimizer)
+    restored = params[key]
+    assert dr.grad_enabled(restored) and restored.index_ad == accepted.index_ad
+    assert restored.index == accepted.index
+    np.testing.assert_allclose(gradient(), before, rtol=1e-4, atol=1e-6 * np.abs(before).max())
+    # The user goes on optimising from there (here: the optimiser back on the
+    # accepted value, then a step that the profile accepts).
+    optimizer[key] = params[key]
+    params.update(optimizer)
+    dr.backward(dr.mean(mi.render(scene, params, spp=4, seed=3), axis=None))
+    optimizer.step()
+    params.update(optimizer)
+    assert not np.array_equal(np.array(params[key]), np.array(accepted))
