@@ -261,16 +261,19 @@ class _Patches:
             patch = np.zeros(profile.segment_count, dtype=np.int64)
             if kind_of(lathe.surface).kernel != "bspline":
                 # segment k starts a new patch unless it goes on smoothly
-                # from the segment before it (same joint, same normal)
+                # from the segment before it (same joint, same normal; with
+                # smooth false every joint is a crease: flat shading)
                 linked = profile.segments[1:, 0] == profile.segments[:-1, 1]
                 smooth = linked & np.all(np.abs(profile.normal_start[1:] - profile.normal_end[:-1]) < 1e-9,
-                                         axis=1)
+                                         axis=1) & bool(lathe.smooth)
                 patch[1:] = np.cumsum(~smooth)
-                if profile.closed_loop and len(patch) > 1 and patch[-1] > 0:
-                    # a loop's last patch goes on into its first
-                    wrap = np.all(np.abs(profile.normal_start[0] - profile.normal_end[-1]) < 1e-9)
-                    if wrap and profile.segments[0, 0] == profile.segments[-1, 1]:
-                        patch[patch == patch[-1]] = 0
+                wrap = (profile.closed_loop and lathe.smooth
+                        and profile.segments[0, 0] == profile.segments[-1, 1]
+                        and np.all(np.abs(profile.normal_start[0] - profile.normal_end[-1]) < 1e-9))
+                if wrap and patch[-1] >= 2:
+                    # a loop's last patch goes on into its first (with a
+                    # single crease the two stay apart: that crease parts them)
+                    patch[patch == patch[-1]] = 0
             self.per_lathe.append(patch)
         offsets = np.cumsum([0] + [len(p) for p in self.per_lathe])
         self.offsets = jit_array(mi.UInt32, offsets[:-1])
@@ -283,11 +286,12 @@ class _Patches:
         return dr.gather(mi.UInt32, self.patch, start + prim, active)
 
     def of_chain(self, chain: _Chain) -> np.ndarray:
-        """The patch of each vertex of a recorded chain (-1: no lathe)."""
+        """The patch of each vertex of a recorded chain (-1: no lathe; a
+        lathe hit's ``prim`` is its segment)."""
         out = np.full(chain.lathe.shape, -1, dtype=np.int64)
         for j, patch in enumerate(self.per_lathe):
             mine = chain.lathe == j
-            out[mine] = patch[np.minimum(chain.prim[mine].astype(np.int64), len(patch) - 1)]
+            out[mine] = patch[chain.prim[mine].astype(np.int64)]
         return out
 
 
@@ -390,7 +394,8 @@ class GlassCrossings:
     and the detached contact point ``q`` (world). ``found``: crossings
     bisected; ``dropped``: of those, the ones left out (no grazing contact
     with a lathe: a change of branch, or total internal reflection, that
-    turns the ray; another shape's outline)."""
+    turns the ray; another shape's outline; another outline between the
+    side rays)."""
 
     lanes: _Lanes
     scale: np.ndarray
@@ -639,10 +644,14 @@ def glass_outline_crossings(integrator, scene: mi.Scene, sensor: mi.Sensor, seed
         unit = grad_g / np.maximum(np.linalg.norm(grad_g, axis=1, keepdims=True), 1e-30)
         side_a = _chain(geometry, lathes, sensor, crossing.at(crossing.x - _EPSILON * unit), vertices)
         side_b = _chain(geometry, lathes, sensor, crossing.at(crossing.x + _EPSILON * unit), vertices)
-        grad_g[_first_difference(side_a, side_b, patches) != k_c] = 0.0
+        parts = np.flatnonzero(_first_difference(side_a, side_b, patches) == k_c)
+    if len(parts) == 0:
+        return GlassCrossings.none(len(a.x))
     scale = 1.0 / (lines * np.maximum(probability[chosen], 1e-30))
-    return GlassCrossings(crossing, scale, k_c, lathe_of[keep], seg[keep], u[keep], phi[keep], normal[keep],
-                          t_star[keep], grad_g, q[keep], len(a.x), len(a.x) - len(chosen))
+    lathe_of, seg, u, phi, normal, t_star, q = (value[keep][parts]
+                                                for value in (lathe_of, seg, u, phi, normal, t_star, q))
+    return GlassCrossings(crossing.take(parts), scale[parts], k_c[parts], lathe_of, seg, u, phi, normal,
+                          t_star, grad_g[parts], q, len(a.x), len(a.x) - len(parts))
 
 
 def _terms(integrator, scene: mi.Scene, sensor: mi.Sensor, seed: int, spp: int, crossings: GlassCrossings):

@@ -47,6 +47,7 @@ __all__ = [
     "control_points",
     "cubic_ranges",
     "adaptive_parameters",
+    "curve_functions",
     "flat_intervals",
     "unit_tangents",
     "is_closed",
@@ -497,19 +498,31 @@ def sample_adaptive(seg_ctrl: np.ndarray, max_angle_deg: float = 2.0,
     if max_error is None:
         max_error = 1e-4 * size
 
-    def points(index: np.ndarray, t: np.ndarray) -> np.ndarray:
-        return np.stack(_point_of(coeffs[index], t), axis=1)  # eq. 12
-
-    def tangents(index: np.ndarray, t: np.ndarray) -> np.ndarray:
-        chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
-        return unit_tangents(np.stack(_tangent_of(coeffs[index], t), axis=1), chord, 1e-9 * size)
-
+    points, tangents = curve_functions(lambda index, t: _point_of(coeffs[index], t),  # eq. 12
+                                       lambda index, t: _tangent_of(coeffs[index], t), 1e-9 * size)
     return adaptive_parameters(len(seg_ctrl), points, tangents, max_angle_deg, max_error, max_depth)
 
 
 #: ``(index, t) -> (n, 2)``: points or unit tangents of a curve at the
 #: parameters ``t`` of its segments ``index`` (arrays of one length).
 CurveFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def curve_functions(point_of: Callable, tangent_of: Callable,
+                    tiny: float) -> tuple[CurveFunction, CurveFunction]:
+    """The ``points`` and unit ``tangents`` of a curve for
+    :func:`adaptive_parameters`, from ``point_of(index, t)`` and
+    ``tangent_of(index, t)`` (each a pair of arrays ``(r, z)``): a tangent
+    of speed at most ``tiny`` falls back on its segment's chord
+    (:func:`unit_tangents`)."""
+    def points(index: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return np.stack(point_of(index, t), axis=1)
+
+    def tangents(index: np.ndarray, t: np.ndarray) -> np.ndarray:
+        chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
+        return unit_tangents(np.stack(tangent_of(index, t), axis=1), chord, tiny)
+
+    return points, tangents
 
 
 def adaptive_parameters(n_seg: int, points: CurveFunction, tangents: CurveFunction, max_angle_deg: float,

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bspline import BSplineError, adaptive_parameters, cubic_ranges, resample_curve, unit_tangents
+from .bspline import BSplineError, adaptive_parameters, cubic_ranges, curve_functions, resample_curve
 from .limits import BSPLINE_SAMPLES_PER_SEGMENT, MAX_COORDINATE, check_point_count
 
 __all__ = ["SorError", "SorProfile", "make_sor_profile", "sor_coefficients"]
@@ -114,14 +114,8 @@ class SorProfile:
         """Adaptive ``(segment, t)`` samples for the reference mesh, two
         arrays in curve order (:func:`.bspline.adaptive_parameters`, with a
         chord error of 1e-4 of the curve's size)."""
-        def points(index: np.ndarray, t: np.ndarray) -> np.ndarray:
-            return np.stack(self.evaluate(index, t), axis=1)
-
-        def tangents(index: np.ndarray, t: np.ndarray) -> np.ndarray:
-            # (a disc's centre, where the tangent vanishes: along the disc)
-            chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
-            return unit_tangents(np.stack(self.derivative(index, t), axis=1), chord, 0.0)
-
+        # (a disc's centre, where the tangent vanishes: along the disc)
+        points, tangents = curve_functions(self.evaluate, self.derivative, 0.0)
         return adaptive_parameters(self.segment_count, points, tangents, max_angle_deg, 1e-4 * self.scale())
 
 

@@ -118,7 +118,7 @@ def _read_csv_lines(path: str) -> RawPoints:
                 if not rows.numbers and _is_header(fields):
                     continue
                 separator = _separator(content)
-                if separator == ";" and "," in content:
+                if _decimal_comma(content):
                     raise ProfileError(f"{rows.label(number)}: a decimal comma ({content!r}); numbers are "
                                        "written with a point (1.5, not 1,5)")
                 if first is None:
@@ -144,12 +144,12 @@ def _read_csv_rows(data: bytes, path: str) -> RawPoints | None:
     coordinates: list[float] = []
     sharp: list[bool] = []
     numbers: list[int] = []
-    kind = None  # The pattern (separator) of the first point
+    first_pattern = None  # The pattern (separator) of the first point
     for number, line in enumerate(_LINE_END.split(text), start=1):
         index, match = _row_match(line)
         if match is not None:
-            kind = index if kind is None else kind
-            if index != kind:
+            first_pattern = index if first_pattern is None else first_pattern
+            if index != first_pattern:
                 return None  # (another separator than the first point's)
         else:
             content = line.split("#", 1)[0].strip()
@@ -301,6 +301,21 @@ def _row_match(line: str) -> tuple[int, re.Match | None]:
         if match is not None:
             return index, match
     return -1, None
+
+
+def _decimal_comma(content: str) -> bool:
+    """Whether a CSV line's content writes a number with a decimal comma:
+    commas beside semicolons (``1,5;0``), or a comma between digits among
+    fields that white space separates (``1,5 0``)."""
+    if ";" in content:
+        return "," in content
+    fields = content.split()
+    inner = [f for f in fields if "," in f.strip(",")]  # (a field's trailing comma separates)
+    return len(fields) > 1 and bool(inner) and all(_DECIMAL_COMMA.fullmatch(f) for f in inner)
+
+
+#: A number written with a decimal comma.
+_DECIMAL_COMMA = re.compile(r"[+-]?[0-9]+,[0-9]+(?:[eE][+-]?[0-9]+)?")
 
 
 def _separator(content: str) -> str:

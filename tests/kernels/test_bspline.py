@@ -210,14 +210,8 @@ def _depth_first_samples(n_seg, points, tangents, max_angle_deg, max_error, max_
 def _curve_functions(seg):
     """``points(index, t)`` and ``tangents(index, t)`` of a curve (as
     :func:`lathe_shape.profiles.bspline.sample_adaptive` builds them)."""
-    def points(index, t):
-        return np.stack(B.evaluate(seg, index, t), axis=1)
-
-    def tangents(index, t):
-        chord = points(index, np.ones_like(t)) - points(index, np.zeros_like(t))
-        return B.unit_tangents(np.stack(B.derivative(seg, index, t), axis=1), chord, 1e-9 * B._scale(seg))
-
-    return points, tangents
+    return B.curve_functions(lambda index, t: B.evaluate(seg, index, t),
+                             lambda index, t: B.derivative(seg, index, t), 1e-9 * B._scale(seg))
 
 
 def _wavy_sor(n: int = 60):

@@ -229,6 +229,15 @@ def test_smooth_patches_of_a_profile():
                      for a in -np.arange(13) * np.pi / 6)  # (the first point again: closed)
     assert set(patches(ring, crease_angle=45.0)) == {0}
     assert patches(ring, crease_angle=20.0) == list(range(12))
+    # One crease on the loop (a point flagged sharp): the patches either
+    # side of it differ (merging the last into the first once erased it)
+    sharp = ring.split(", ")
+    sharp[3] += " 1"
+    one = patches(", ".join(p if len(p.split()) == 3 else p + " 0" for p in sharp), crease_angle=45.0)
+    assert one[2] != one[3] and len(set(one)) == 2
+    # Flat shading (smooth false): every joint a crease, the loop's too
+    assert patches("0 0, 1 0, 1 1, 1.05 1.5, 0 1.5", smooth=False) == [0, 1, 2, 3]
+    assert patches(ring, crease_angle=45.0, smooth=False) == list(range(12))
 
 
 def test_crease_seen_through_glass(tmp_path):

@@ -120,6 +120,11 @@ def test_csv_separators(tmp_path):
     with pytest.raises(ProfileError, match=r"euro\.csv, line 3: a decimal comma \('1,5;0'\); numbers are "
                                            r"written with a point \(1\.5, not 1,5\)"):
         read_profile_csv(euro)
+    for number, text in ((2, "0 0\n1,5 0\n1,2 1\n0 1\n"), (1, "1,5 0\n0 0\n1.2 1\n")):
+        spaced = tmp_path / "spaced.csv"
+        spaced.write_text(text)
+        with pytest.raises(ProfileError, match=rf"spaced\.csv, line {number}: a decimal comma \('1,5 0'\)"):
+            read_profile_csv(spaced)
     mixed = tmp_path / "mixed.csv"
     mixed.write_text("r,z\n0,0\n1.5,0\n1.2;1\n0,1\n")
     with pytest.raises(ProfileError, match=r"mixed\.csv, line 4: columns separated by semicolons, where "
