@@ -34,7 +34,7 @@ from .integrator_base import contradicts
 from .line_walk import start_walk
 from .media_segments import segment_transmittance
 
-__all__ = ["NEWTON_STEPS", "POLICY_SAMPLE", "ChainSolution", "chain_vertex", "policy_branch",
+__all__ = ["NEWTON_STEPS", "POLICY_SAMPLE", "ChainSolution", "camera_ray", "chain_vertex", "policy_branch",
            "solve_camera_chain"]
 
 #: Newton steps at most (a chord step traces one chain, a step with a new
@@ -99,9 +99,27 @@ class ChainSolution:
         self.wo = wo
 
 
+def camera_ray(camera: mi.Point3f, d: mi.Vector3f, clip: tuple | None) -> mi.Ray3f:
+    """The camera ray from ``camera`` along ``d`` (unit), clipped as
+    Mitsuba's perspective camera clips its rays: ``clip`` = (viewing
+    direction, near clip, far clip) starts it at depth (along the viewing
+    direction) ``near`` and ends it at depth ``far``; ``None``: unclipped."""
+    if clip is None:
+        return mi.Ray3f(camera, d)
+    forward, near, far = clip
+    cos_camera = dr.dot(d, forward)
+    inv_z = dr.rcp(cos_camera)
+    near_t, far_t = near * inv_z, far * inv_z
+    ray = mi.Ray3f(camera + d * near_t, d)
+    # (no ray behind the camera: it meets nothing)
+    ray.maxt = dr.select(cos_camera > 0.0, far_t - near_t, 0.0)
+    return ray
+
+
 @dr.syntax
 def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal3f, shape: mi.ShapePtr,
-                       max_vertices: mi.UInt32, active: mi.Bool, media: bool = False) -> ChainSolution:
+                       max_vertices: mi.UInt32, active: mi.Bool, media: bool = False,
+                       clip: tuple | None = None) -> ChainSolution:
     """Eqs. 37-39: the camera direction whose ray goes through 1 to
     ``max_vertices`` Dirac-delta vertices (branches by
     :data:`POLICY_SAMPLE`, none contradicting eq. 11) and lands on ``D``
@@ -110,7 +128,10 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
     for chord steps while the residual halves), and eq. 39's area from the
     Jacobian at the solution. With ``media`` the throughput holds the
     transmittance (eq. 44) of the homogeneous media along the chain (the camera in
-    none). ``geometry``: the scene's
+    none). ``clip``: the camera's (viewing direction, near clip, far clip),
+    which clip every chain's first segment as the camera's rays are clipped
+    (:func:`camera_ray`: the first vertex must lie in the clip range, and
+    nothing nearer the camera occludes); ``None``: unclipped. ``geometry``: the scene's
     :class:`~lathe_shape.plugin.scene_geometry.ExactSceneGeometry`. One
     query per loop iteration: the lathe traversal is compiled once."""
     width = dr.width(p)
@@ -128,7 +149,7 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
     trace = mi.UInt32(0)                     # Which chain is traced: 0 at (a, b), 1 at +a, 2 at +b
     steps = mi.UInt32(0)                     # Newton steps taken
     going = mi.Bool(active)                  # Lanes still solving
-    ray = mi.Ray3f(camera, forward)          # Current ray of the chain being traced
+    ray = camera_ray(camera, forward, clip)  # Current ray of the chain being traced
     walk = start_walk(width)                 # Its line and last lathe crossing
     m = mi.UInt32(0)                         # Vertices of the chain being traced
     branch = mi.Float(1.0)                   # Its branch probabilities' product
@@ -236,7 +257,7 @@ def solve_camera_chain(geometry, camera: mi.Point3f, p: mi.Point3f, n: mi.Normal
         db_next = dr.select(trace == 2, h, 0.0)
         direction = dr.normalize(forward + (a + da_next) * e1 + (b + db_next) * e2)
         restart = ends & going
-        ray = dr.select(restart, mi.Ray3f(camera, direction), next_ray)
+        ray = dr.select(restart, camera_ray(camera, direction, clip), next_ray)
         walk.lathe = dr.select(restart, NO_LATHE, walk.lathe)
         m[restart] = 0
         branch[restart] = 1.0

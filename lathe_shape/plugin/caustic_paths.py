@@ -40,11 +40,20 @@ stays unbiased for any spheres.
 
 A directional light's particles come from far back through a point drawn
 uniformly on the disk of one of those spheres that faces the light (eq. 34);
-path tracing cannot hit a directional light either. An environment map's
+path tracing cannot hit a directional light either. (They start just outside
+a sphere around all the spheres, where a shadow ray from there towards the
+light finds nothing: the light then reaches that start as it would from far
+back, and float32 keeps the line at the glass's scale in a scene of any
+size; where it finds something they start from beyond the scene.) An environment map's
 come the same way along a direction of its own sampling (eq. 35); a uniform
 ``constant`` sky sends none (path tracing meets it in every direction).
 Each light sends particles in proportion to its power into the cones
 (eq. 36).
+
+The camera connection is the camera rays' (:class:`PinholeCamera`): only
+points (or a chain's first vertex) at a depth within the sensor's
+``near_clip`` .. ``far_clip`` are seen, only what lies in that range
+occludes, and a ``principal_point_offset`` shifts the film.
 
 Limits (each falls back to path tracing alone, unbiased): RGB variants,
 a pinhole ``perspective`` sensor, not with ``hide_emitters``.
@@ -58,6 +67,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..kernels.top_level import NO_LATHE
 from .camera_chain import solve_camera_chain
 from .integrator_base import contradicts, sample_with_fallback, with_geometric_frame
 from .line_walk import start_walk
@@ -141,6 +151,19 @@ def aim_spheres(lathes: list) -> list[tuple[tuple[float, float, float], float]]:
     return spheres
 
 
+def bounding_sphere(spheres: list) -> tuple[tuple[float, float, float], float]:
+    """A sphere (centre, radius) holding every sphere of ``spheres``
+    (around the centre of their bounding box; a unit sphere at the origin
+    for none)."""
+    if not spheres:
+        return (0.0, 0.0, 0.0), 1.0
+    centres = np.array([centre for centre, _ in spheres], dtype=np.float64).reshape(-1, 3)
+    radii = np.array([radius for _, radius in spheres], dtype=np.float64)
+    centre = 0.5 * ((centres - radii[:, None]).min(axis=0) + (centres + radii[:, None]).max(axis=0))
+    radius = float(np.max(np.linalg.norm(centres - centre, axis=1) + radii))
+    return tuple(float(c) for c in centre), radius
+
+
 def cone_cosine(centre: mi.Point3f, radius: float, p: mi.Point3f) -> tuple[mi.Vector3f, mi.Float]:
     """Eq. 33: the axis (unit) and the cosine of the half angle of the cone
     from ``p`` around the sphere (``centre``, ``radius``); -1 (all
@@ -217,44 +240,116 @@ def pass_seed(seed: int | mi.UInt32, index: int) -> mi.UInt32:
 
 class PinholeCamera:
     """What eq. 32 needs of a pinhole ``perspective`` sensor: its position,
-    viewing direction and the area of its film at unit distance (read from
-    the sensor's own importance straight ahead)."""
+    viewing direction, the area of its film (crop window) at unit distance
+    and its clip range, and the importance of a connection to it.
+
+    The importance is this class's own, 1 / (film area cos^3) per unit
+    solid angle on the film (the density of a camera ray drawn uniformly
+    over it): Mitsuba 3.9.1's ``sample_direction`` gives the right film
+    position and clip test (its ``pdf`` is 0 outside the clip range and
+    off the film) but an importance that ignores ``principal_point_offset``
+    (it is 0 on the part of a shifted film outside the unshifted one) and
+    the clip range (not 0 beyond ``far_clip``).
+
+    The clip range is the camera rays': Mitsuba's perspective camera starts
+    each ray where its depth along the viewing direction (camera-space z)
+    is ``near_clip`` and ends it where it is ``far_clip``, so a point is
+    seen only at a depth in [near_clip, far_clip], and only what lies at
+    such a depth occludes it."""
 
     def __init__(self, sensor: mi.Sensor) -> None:
         matrix = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+        # (Mitsuba refuses scale in a perspective camera's to_world: its
+        # columns are orthonormal, depth is the dot product with forward)
         forward = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
         self.origin = [float(v) for v in matrix[:3, 3]]
         self.forward = [float(v) for v in forward]
-        # The importance along the ray through the film's centre (the
-        # arithmetic in NumPy: no kernel with this camera's numbers in it)
-        ray = sensor.sample_ray(0.0, 0.5, mi.Point2f(0.5), mi.Point2f(0.5))[0]
-        origin, direction = np.array(ray.o).ravel(), np.array(ray.d).ravel()
-        ahead = dr.zeros(mi.Interaction3f, 1)
-        ahead.p = dr.opaque(mi.Point3f, [float(v) for v in origin + direction])
-        importance = sensor.sample_direction(ahead, mi.Point2f(0.5))[1]
-        cos_centre = float(np.dot(direction, forward))
-        #: The film's (its crop window's) area on the plane at unit distance
-        #: (1 / importance there).
-        self.film_area = 1.0 / (float(importance.x.numpy()[0]) * cos_centre**3)
+        #: The camera rays' clip range (depths along :attr:`forward`).
+        self.near_clip = float(sensor.near_clip())
+        self.far_clip = float(sensor.far_clip())
+        # The film's (its crop window's) corners on the plane at depth 1, from
+        # the sensor's own rays (shifted alike by a principal point offset,
+        # which changes no area)
+        rays = sensor.sample_ray(0.0, 0.5, mi.Point2f([0.0, 1.0], [0.0, 1.0]), mi.Point2f(0.5))[0]
+        directions = np.array(rays.d, dtype=np.float64).reshape(3, 2).T @ matrix[:3, :3]  # (camera space)
+        corners = directions[:, :2] / directions[:, 2:3]
+        #: The film's (its crop window's) area on the plane at unit distance.
+        self.film_area = float(abs(np.prod(corners[1] - corners[0])))
         # Opaque, so that a moved camera (a turntable's orbit) compiles no
         # new kernel
         self._origin = dr.opaque(mi.Point3f, self.origin)
         self._forward = dr.opaque(mi.Vector3f, self.forward)
         self._film_area = dr.opaque(mi.Float, self.film_area)
+        self._near = dr.opaque(mi.Float, self.near_clip)
+        self._far = dr.opaque(mi.Float, self.far_clip)
+        # A depth inside the clip range at which a direction's film
+        # position is read (their geometric mean: 0.32 at the defaults 0.01
+        # and 10^4, within float32's range for any range)
+        self._reference_depth = dr.opaque(mi.Float, math.sqrt(self.near_clip * self.far_clip))
+
+    @property
+    def clip(self) -> tuple[mi.Vector3f, mi.Float, mi.Float]:
+        """(Viewing direction, near clip, far clip), for
+        :func:`~lathe_shape.plugin.camera_chain.solve_camera_chain`."""
+        return self._forward, self._near, self._far
+
+    def depth(self, p: mi.Point3f) -> mi.Float:
+        """The depth of ``p`` along the viewing direction (camera-space z)."""
+        return dr.dot(p - self._origin, self._forward)
+
+    def in_clip_range(self, p: mi.Point3f) -> mi.Bool:
+        """Whether the camera's rays can reach ``p``: its depth in
+        [near_clip, far_clip] (the test of Mitsuba's ``sample_direction``)."""
+        z = self.depth(p)
+        return (z >= self._near) & (z <= self._far)
+
+    def shadow_ray(self, it: mi.Interaction3f) -> mi.Ray3f:
+        """The shadow ray of the straight connection from ``it`` (in the
+        clip range) to the camera: it ends on the near-clip plane, as the
+        camera rays start there (nothing nearer the camera occludes)."""
+        scale = self._near / dr.maximum(self.depth(it.p), self._near)
+        return it.spawn_ray_to(self._origin + (it.p - self._origin) * scale)
+
+    def connect(self, sensor: mi.Sensor, it: mi.Interaction3f,
+                active: mi.Bool) -> tuple[mi.DirectionSample3f, mi.Spectrum]:
+        """The straight connection from ``it`` to the camera: the sensor's
+        direction sample (film position ``uv``) and the importance over the
+        squared distance, 0 where the camera cannot see ``it`` (behind it,
+        off the film, out of the clip range)."""
+        ds = sensor.sample_direction(it, mi.Point2f(0.5), active)[0]
+        seen = active & (ds.pdf > 0.0)
+        importance = dr.select(seen, self.direction_density(-ds.d) / dr.square(ds.dist), 0.0)
+        return ds, mi.Spectrum(importance)
+
+    def film_position(self, sensor: mi.Sensor, d: mi.Vector3f,
+                      active: mi.Bool) -> tuple[mi.Point2f, mi.Spectrum]:
+        """The film position (pixels, crop window) of the camera ray along
+        ``d`` (unit, world) and the importance per unit solid angle there
+        (0 off the film)."""
+        it = dr.zeros(mi.Interaction3f, dr.width(d))
+        cos_camera = dr.dot(d, self._forward)
+        it.p = self._origin + d * (self._reference_depth / dr.maximum(cos_camera, 1e-6))
+        ds = sensor.sample_direction(it, mi.Point2f(0.5), active)[0]
+        seen = active & (ds.pdf > 0.0) & (cos_camera > 0.0)
+        return ds.uv, mi.Spectrum(dr.select(seen, self.direction_density(d), 0.0))
 
     def density(self, p: mi.Point3f, n: mi.Normal3f) -> mi.Float:
         """Eq. 32: the area density at ``p`` (normal ``n``) of a camera ray
         drawn uniformly over the whole film: 1 / (film area cos^3) per unit
-        solid angle, times |cos| at ``p`` over the squared distance."""
+        solid angle, times |cos| at ``p`` over the squared distance (0
+        outside the clip range, which the camera rays do not reach)."""
         to_p = p - self._origin
         dist2 = dr.squared_norm(to_p)
         d = to_p * dr.rsqrt(dist2)
-        return self.direction_density(d) * dr.abs(dr.dot(n, d)) / dist2
+        density = self.direction_density(d) * dr.abs(dr.dot(n, d)) / dist2
+        return dr.select(self.in_clip_range(p), density, 0.0)
 
     def direction_density(self, d: mi.Vector3f) -> mi.Float:
         """Eqs. 32 and 40: the solid-angle density of the camera ray
         direction ``d`` (unit) drawn uniformly over the whole film (0
-        behind the camera)."""
+        behind the camera). (Whether the ray reaches a point along ``d``
+        is the clip range's matter: :meth:`density`, and the chain
+        solver's first segment for eq. 40.)"""
         cos_camera = dr.dot(d, self._forward)
         return dr.select(cos_camera > 0.0, dr.rcp(self._film_area * dr.maximum(cos_camera, 1e-6) ** 3), 0.0)
 
@@ -334,6 +429,9 @@ class CausticTracer:
         #: The same as opaque Dr.Jit values (a moved lathe compiles no new kernel).
         self.opaque_spheres = [(dr.opaque(mi.Point3f, centre), dr.opaque(mi.Float, radius))
                                for centre, radius in self.spheres]
+        #: A sphere (centre, radius) around every aiming sphere: directional
+        #: and environment particles start just outside it (:meth:`_emit`).
+        self.bounding_sphere = bounding_sphere(self.spheres)
         centres = [centre for centre, _ in self.spheres]
         self.sphere_centres = np.array(centres, dtype=np.float32).reshape(-1, 3)
         self.sphere_radii = np.array([radius for _, radius in self.spheres], dtype=np.float32)
@@ -484,13 +582,30 @@ class CausticTracer:
         beta = dr.select(p_select > 0.0, beta / p_select, 0.0)
         light_density = dr.select(is_environment, sky_density, light_density)
         light_density = dr.select(is_directional, dr.inf, light_density)
-        origin = dr.zeros(mi.SurfaceInteraction3f, size)
+        # Where a directional or environment particle starts along its line
+        # (the line, and so its density, is the same wherever it starts):
+        # just outside the sphere around every aiming sphere (a plane
+        # tangent to it, facing the light), so that every lathe it aims at
+        # is ahead of it and float32 keeps the line's position at the scale
+        # of the lathes (2.5e-7 of a large scene's size from far back:
+        # speckles on a floor 10^6 wide). The light reaches that start
+        # unhindered only if nothing lies between it and the light:
+        # :meth:`_trace` tests that first (the particle's first query, a
+        # shadow ray towards the light) and starts from far back, as the
+        # light does, where something does.
+        infinite = is_directional | is_environment
+        towards = dr.select(is_directional, sun.d, sky.d)  # (unit, towards the light)
+        line_point = dr.select(is_directional, through, through_sky)
+        bound_centre = dr.opaque(mi.Point3f, self.bounding_sphere[0])
+        bound_radius = dr.opaque(mi.Float, self.bounding_sphere[1])
+        reach = dr.dot(bound_centre - line_point, towards) + bound_radius * (1.0 + 1e-3)
         far = dr.opaque(mi.Float, self.far)
-        origin.p = dr.select(is_directional, through + sun.d * far,
-                             dr.select(is_environment, through_sky + sky.d * far, ps.p))
-        origin.n = dr.select(is_delta | is_directional | is_environment, 0.0, ps.n)
+        far_start = line_point + towards * far
+        origin = dr.zeros(mi.SurfaceInteraction3f, size)
+        origin.p = dr.select(infinite, line_point + towards * dr.maximum(reach, 0.0), ps.p)
+        origin.n = dr.select(is_delta | infinite, 0.0, ps.n)
         origin.time = ps.time
-        return origin, d, beta, light_density
+        return origin, d, beta, light_density, (infinite, far_start)
 
     def _light_powers(self, scene: mi.Scene, particles: int = 4096) -> np.ndarray:
         """Eq. 36: each light's power into the aiming cones, estimated from
@@ -502,7 +617,7 @@ class CausticTracer:
         sampler = mi.load_dict({"type": "independent"})
         sampler.seed(dr.opaque(mi.UInt32, 12345), particles * lights)
         pick = dr.arange(mi.UInt32, particles * lights) // particles
-        _, _, beta, _ = self._emit(scene, sampler, particles * lights, pick, mi.Float(1.0))
+        beta = self._emit(scene, sampler, particles * lights, pick, mi.Float(1.0))[2]
         power = np.nan_to_num(np.array(mi.luminance(beta)), nan=0.0, posinf=0.0).reshape(lights, particles)
         return np.maximum(power, 0.0).mean(axis=1)
 
@@ -539,13 +654,26 @@ class CausticTracer:
 
         # ---------------- Eqs. 33-35: a particle aimed at the lathes ----------------
         pick = mi.DiscreteDistribution(jit_array(mi.Float, self.selection)).sample(sampler.next_1d())
-        origin, d, beta, light_density = self._emit(scene, sampler, size, pick, per_camera_sample)
+        origin, d, beta, light_density, (infinite, far_start) = self._emit(scene, sampler, size, pick,
+                                                                          per_camera_sample)
 
         ray = origin.spawn_ray(d)                 # Current ray of the particle
         walk = start_walk(size)                   # Its line and last lathe crossing
         chain = mi.UInt32(0)                      # Specular vertices passed so far
         blocking = dr.zeros(mi.Bool, size)        # ... one of them not a vertex shadow rays cross
         active = dr.max(beta) > 0.0               # Particles still going through glass
+        # A directional or environment particle starts near the lathes
+        # (_emit) where nothing lies between that start and the light: its
+        # first query is a shadow ray from there towards the light (which
+        # every surface beyond the start blocks, as it would have met the
+        # particle coming from far back), then it starts from there or, where
+        # blocked, from far back (no light is lost or added: the same line,
+        # the same surfaces met along it)
+        probing = active & infinite               # Lanes whose start is being tested
+        active &= ~probing
+        near_ray = mi.Ray3f(ray)                  # (their two starts)
+        far_ray = mi.Ray3f(ray)
+        far_ray.o = far_start
         landed = dr.zeros(mi.Bool, size)          # Particles that reached a diffuse D
         si_d = dr.zeros(mi.SurfaceInteraction3f, size)  # ... that D
         chain_d = mi.UInt32(0)                    # ... the specular vertices before it
@@ -556,12 +684,13 @@ class CausticTracer:
         # the same traced lathe traversal as the walked rays (as lathe_path's
         # emitter samples: one traversal compiled, not two)
         shadow = dr.zeros(mi.Ray3f, size)         # Connection from D to the camera
-        pending = dr.zeros(mi.Bool, size)         # Lanes with one to test
+        shadow[probing] = mi.Ray3f(ray.o, -d)     # (first: from the near start towards the light)
+        pending = mi.Bool(probing)                # Lanes with one to test
         visible = dr.zeros(mi.Bool, size)         # Lanes whose connection is clear
         # (a lane that landed runs once more to test its connection)
         while dr.hint(active | pending, max_iterations=-1, label="lathe_path_caustics"):
             si, walk, occluded = geometry.walk_and_test(ray, active, walk, False, shadow, pending)
-            visible |= pending & ~occluded
+            visible |= pending & ~probing & ~occluded
             bsdf = si.bsdf(ray)
             delta = pure_delta(bsdf)
             valid = active & si.is_valid()
@@ -579,7 +708,9 @@ class CausticTracer:
             landed |= lands
             si_d[lands] = si
             chain_d[lands] = chain
-            ds_here, importance_here = sensor.sample_direction(mi.Interaction3f(si), sampler.next_2d(), lands)
+            # (the camera's own importance: 0 out of its clip range, right
+            # with a principal point offset, PinholeCamera)
+            ds_here, importance_here = self.camera.connect(sensor, mi.Interaction3f(si), lands)
             ds[lands] = ds_here
             if dr.hint(self.media, mode="scalar"):
                 # ... and eq. 44 on the straight line
@@ -591,7 +722,9 @@ class CausticTracer:
             # camera is blocked tries a chain; where it is clear and off the
             # film, the solver's first trace, that same line, meets no glass
             # and fails on both sides of eq. 40)
-            shadow = si.spawn_ray_to(self.camera._origin)
+            # (to the near-clip plane: what lies nearer the camera is
+            # clipped away from its rays and occludes nothing)
+            shadow = self.camera.shadow_ray(si)
             pending = lands
             active = valid & delta & (chain < self.max_chain)
 
@@ -621,6 +754,12 @@ class CausticTracer:
             ray = si.spawn_ray(wo_world)
             chain += 1
             active &= dr.max(beta) > 0.0
+            # The tested starts: near where the light reaches it unhindered
+            ray = dr.select(probing, dr.select(occluded, far_ray, near_ray), ray)
+            chain[probing] = 0
+            walk.lathe[probing] = NO_LATHE
+            active |= probing
+            probing &= False
 
         # ---------------- The camera connection at D ----------------
         splat = landed & visible & (dr.max(importance) > 0.0)
@@ -670,13 +809,13 @@ class CausticTracer:
         splat)."""
         _, si_d, beta, light_density, chain_d = behind
         limit = self.camera_chain_limit(chain_d)
+        # (the chain's first vertex in the camera's clip range: the solver
+        # traces its first segment as the camera rays)
         solution = solve_camera_chain(geometry, self.camera._origin, si_d.p, si_d.n, si_d.shape, limit,
-                                      limit >= 1, media=self.media)
+                                      limit >= 1, media=self.media, clip=self.camera.clip)
         through = solution.found
-        it = dr.zeros(mi.Interaction3f, dr.width(through))
-        it.p = self.camera._origin + solution.d
-        ds, importance = sensor.sample_direction(it, mi.Point2f(0.5), through)
-        through &= (ds.pdf > 0.0) & (dr.max(importance) > 0.0)
+        uv, importance = self.camera.film_position(sensor, solution.d, through)
+        through &= dr.max(importance) > 0.0
         # Eq. 40: the camera's density of D through the chain; the light
         # tracer tries the chain for a share chain_share of its particles
         camera_density = (self.camera.direction_density(solution.d) * solution.branch
@@ -688,4 +827,4 @@ class CausticTracer:
         connection = importance * solution.throughput / (cos_d * solution.area_per_solid_angle * share)
         value, splat = self._connection(si_d, solution.wo, beta, light_density * share, camera_density,
                                         connection, through)
-        return ds.uv, value, splat
+        return uv, value, splat

@@ -22,23 +22,33 @@ from .deferred_solves import DeferredChainSolves, initial_capacity
 from .media_segments import heterogeneous_medium
 from .params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS, typed_property
 
-__all__ = ["CausticSettings", "NOTHING_TO_TRACE", "add_to_film", "caustic_media_problem", "caustic_setup",
-           "render_with_caustics"]
+__all__ = ["MAX_PARTICLES", "CausticSettings", "NOTHING_TO_TRACE", "add_to_film", "caustic_media_problem",
+           "caustic_setup", "check_particle_count", "render_with_caustics"]
 
 #: Why a render has no light-traced caustic paths though ``caustics`` is on.
 NOTHING_TO_TRACE = ("no lathe with a Dirac-delta BSDF, or no light (area, point, spot, directional, "
                     "environment)")
 
 
+#: Most light particles one render traces: the limit the command-line tools
+#: put on a render's camera samples, 2^32 - 2^24
+#: (:data:`lathe_shape.cli.budget.MAX_SAMPLES`, which this layer does not
+#: import; a test keeps the two equal). A billion particles did not end in
+#: hours on two cores.
+MAX_PARTICLES = 2**32 - 2**24
+
+
 @dataclass(frozen=True)
 class CausticSettings:
     """The ``caustics``, ``caustic_paths``, ``caustic_camera_chains`` and
-    ``caustic_max_chain`` parameters (documented with the integrators)."""
+    ``caustic_max_chain`` parameters (documented with the integrators);
+    ``who``, the plugin they belong to (for errors)."""
 
     enabled: bool
     paths: float
     camera_chains: float
     max_chain: int
+    who: str = "lathe_path"
 
     @classmethod
     def read(cls, props: mi.Properties, who: str) -> CausticSettings:
@@ -54,7 +64,24 @@ class CausticSettings:
         max_chain = typed_property(props, "caustic_max_chain", int, 8, who)
         if max_chain < 1:
             raise ValueError(f"{who}: parameter 'caustic_max_chain' must be >= 1; got {max_chain}")
-        return cls(enabled, paths, chains, max_chain)
+        return cls(enabled, paths, chains, max_chain, who)
+
+
+def check_particle_count(settings: CausticSettings, spp: int, width: int, height: int) -> int:
+    """The number of light particles of a render of ``spp`` samples per
+    pixel on a ``width`` x ``height`` film (its crop window):
+    ``caustic_paths`` per camera sample, at least 1. Raises ValueError,
+    naming the parameter, the count and the limit, beyond
+    :data:`MAX_PARTICLES`."""
+    samples = int(spp) * int(width) * int(height)
+    count = max(1, round(settings.paths * samples))
+    if count > MAX_PARTICLES:
+        raise ValueError(
+            f"{settings.who}: parameter 'caustic_paths' = {settings.paths:g} particles per camera sample at "
+            f"{spp} spp on a {width}x{height} film is {count} light particles, more than the {MAX_PARTICLES} "
+            f"one render may trace: use at most caustic_paths = {MAX_PARTICLES / samples:.6g}, fewer spp, "
+            "or average renders with different seeds")
+    return count
 
 
 def caustic_media_problem(scene: mi.Scene, sensor: mi.Sensor) -> str:
@@ -123,7 +150,7 @@ def render_with_caustics(integrator, settings: CausticSettings, base_render: Cal
     film = sensor_obj.film()
     spp = spp or sensor_obj.sampler().sample_count()
     crop = film.crop_size()
-    count = max(1, round(settings.paths * spp * crop.x * crop.y))
+    count = check_particle_count(settings, spp, crop.x, crop.y)
     per_camera_sample = count / (spp * crop.x * crop.y)
     # Eq. 40's rare solves wait in a buffer (deferred_solves.py); one
     # that overflowed renders again (the same samples) with room for all
@@ -150,31 +177,51 @@ def render_with_caustics(integrator, settings: CausticSettings, base_render: Cal
 
 def add_to_film(film: mi.Film, image: mi.TensorXf, caustic: mi.TensorXf) -> mi.TensorXf:
     """``image`` (developed, channels as ``film.bitmap()`` names them) with
-    ``caustic`` (H, W, 3) added to its RGB channels (its luminance to the Y
-    channel of a luminance film); the film then holds
-    the sum, so that ``film.develop()``, ``film.bitmap()`` and ``film.write()``
-    give it too (its weights become 1)."""
+    ``caustic`` (H, W, 3, linear sRGB) added as the film develops RGB: to
+    its R, G, B channels, or converted to X, Y, Z by Mitsuba's
+    ``srgb_to_xyz`` (an ``xyz`` or ``xyza`` film), or its luminance to Y
+    (``luminance``, ``luminance_alpha``); the film then holds the sum, so
+    that ``film.develop()``, ``film.bitmap()`` and ``film.write()`` give it
+    too (its weights become 1; it stores RGB whatever it develops)."""
     total = np.array(image, dtype=np.float32)
     caustic = np.asarray(caustic, dtype=np.float32)
     raw = film.bitmap(raw=True)
     raw_names = [raw.struct_()[index].name for index in range(raw.channel_count())]
     developed = film.bitmap()
     names = [developed.struct_()[index].name for index in range(developed.channel_count())]
+    ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
     if names[:3] == ["R", "G", "B"]:
         total[:, :, :3] += caustic
-    else:  # a luminance film (Y, YA): the caustic's luminance (Rec. 709)
+        rgb = total[:, :, :3]
+    elif names[:3] == ["X", "Y", "Z"]:
+        to_xyz = srgb_to_xyz_matrix()
+        total[:, :, :3] += caustic @ to_xyz.T.astype(np.float32)
+        # (stored as the RGB that develops to these X, Y, Z)
+        rgb = (total[:, :, :3].astype(np.float64) @ np.linalg.inv(to_xyz).T).astype(np.float32)
+    elif names[:1] == ["Y"]:  # the caustic's luminance (Rec. 709, as the film weighs RGB)
         total[:, :, 0] += caustic @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    ones = np.ones(total.shape[:2] + (1,), dtype=np.float32)
+        # (a grey of the developed Y develops to that Y)
+        rgb = np.repeat(total[:, :, :1], 3, axis=2)
+    else:
+        raise ValueError(f"caustics cannot be added to a film whose channels are {names} (pixel formats "
+                         "rgb, rgba, xyz, xyza, luminance and luminance_alpha can take them)")
 
     def stored(name: str) -> np.ndarray:
-        # (a luminance film stores RGB and develops their luminance: a grey
-        # of the developed Y develops to that Y)
         if name == "W":
             return ones
-        channel = names.index(name if name in names else "Y")
-        return total[:, :, channel][:, :, None]
+        if name in ("R", "G", "B"):
+            return rgb[:, :, "RGB".index(name)][:, :, None]
+        return total[:, :, names.index(name)][:, :, None]
 
     storage = np.concatenate([stored(name) for name in raw_names], axis=2)
     film.prepare(raw_names[raw_names.index("W") + 1:])
     film.put_block(mi.ImageBlock(mi.TensorXf(storage), film.crop_offset()))
     return mi.TensorXf(total)
+
+
+def srgb_to_xyz_matrix() -> np.ndarray:
+    """The 3x3 matrix (float64) of Mitsuba's ``srgb_to_xyz``, which an
+    ``xyz`` film develops its RGB samples with (read from Mitsuba)."""
+    columns = [np.array(mi.srgb_to_xyz(mi.Color3f(*unit)), dtype=np.float64).ravel()
+               for unit in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
+    return np.stack(columns, axis=1)

@@ -93,7 +93,9 @@ class DeferredChainSolves:
         p, n, shape, limit = take(self.p), take(self.n), take(self.shape), take(self.limit)
         camera_d, vertices = take(self.camera_d), take(self.vertices)
         active = dr.full(mi.Bool, True, count)
-        solution = solve_camera_chain(geometry, tracer.camera._origin, p, n, shape, limit, active)
+        # (clipped as the camera rays and the light tracer's solves are)
+        solution = solve_camera_chain(geometry, tracer.camera._origin, p, n, shape, limit, active,
+                                      clip=tracer.camera.clip)
         same = (solution.found & (solution.vertices == vertices)
                 & (dr.norm(solution.d - camera_d) < SAME_SOLUTION))
         density = (take(self.density) * tracer.camera.direction_density(camera_d)
@@ -101,11 +103,9 @@ class DeferredChainSolves:
         weight = caustic_weight(density, dr.select(same, tracer.chain_share * take(self.light), 0.0))
         value = take(self.value) * weight
         # The sample's film position, from its camera ray (a pinhole)
-        it = dr.zeros(mi.Interaction3f, count)
-        it.p = tracer.camera._origin + camera_d
-        ds, _ = sensor.sample_direction(it, mi.Point2f(0.5), active)
+        uv, _ = tracer.camera.film_position(sensor, camera_d, active)
         film = sensor.film()
-        pos = ds.uv + mi.Vector2f(film.crop_offset())
+        pos = uv + mi.Vector2f(film.crop_offset())
         if film.rfilter().is_box_filter():
             pos = dr.floor(pos)  # (as Mitsuba splats box-filtered samples)
         block = film.create_block()

@@ -152,8 +152,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
        - |float|
        - Light particles per camera sample for ``caustics``: more make the
          caustics converge faster and cost more (a particle costs about
-         three camera samples, as it always goes through glass).
-         (Default: 0.03)
+         three camera samples, as it always goes through glass). A render
+         traces at most 2^32 - 2^24 particles (``caustic_paths`` x spp x
+         film pixels): more is refused with an error. (Default: 0.03)
 
      * - caustic_camera_chains
        - |float|

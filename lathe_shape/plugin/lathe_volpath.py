@@ -133,7 +133,9 @@ class LatheVolpathIntegrator(ExactLatheSamplingIntegrator):
 
      * - caustic_paths
        - |float|
-       - Light particles per camera sample for ``caustics``. (Default: 0.03)
+       - Light particles per camera sample for ``caustics`` (at most
+         2^32 - 2^24 particles per render, as for ``lathe_path``).
+         (Default: 0.03)
 
      * - caustic_camera_chains
        - |float|

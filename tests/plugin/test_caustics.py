@@ -147,7 +147,9 @@ def test_caustic_seen_through_a_glass_pane():
     plain = np.mean([luminance(render(scene, 2048, seed=s, caustics=False)) for s in range(4)], axis=0)
     traced = luminance(render(scene, 256, seed=11))
     assert traced[region].mean() == pytest.approx(plain[region].mean(), rel=0.03)
-    assert traced.mean() == pytest.approx(plain.mean(), rel=0.01)
+    # (the whole image's mean of one such render varies by 0.7%: seeds 11-18
+    # read 0.2537-0.2594, their mean 0.2563 +- 0.0006 against plain's 0.2564)
+    assert traced.mean() == pytest.approx(plain.mean(), rel=0.02)
     # Nearly all weight on the light tracer's chains (every blocked particle
     # solves): the solver's connection (eq. 39) alone against plain
     many = np.mean([luminance(render(scene, 64, seed=30 + s, caustic_paths=16.0, caustic_camera_chains=1.0))
