@@ -1,11 +1,19 @@
 """How much memory the machine has left: the one estimate that the shape's
-reference-mesh budget and the commands' render budget compare against."""
+reference-mesh budget and the commands' render budget compare against; and
+how many samples one render may take (:data:`MAX_SAMPLES`)."""
 
 from __future__ import annotations
 
 import os
 
-__all__ = ["available_memory", "format_bytes"]
+__all__ = ["MAX_SAMPLES", "available_memory", "format_bytes"]
+
+#: Samples (pixels x spp, or light particles) one render may take: Mitsuba
+#: 3.9.1's LLVM variants silently render a black image a little below 2**32
+#: samples and crash when Mitsuba splits a larger render into passes; this
+#: many render correctly (the commands' budget, cli/budget.py, and the
+#: caustics' particles, plugin/caustic_render.py).
+MAX_SAMPLES = 2**32 - 2**24
 
 
 def available_memory() -> int | None:

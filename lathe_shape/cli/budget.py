@@ -3,7 +3,7 @@ the rules are in :mod:`.common`'s docstring): :func:`check_render_budget`."""
 
 from __future__ import annotations
 
-from ..memory import available_memory, format_bytes
+from ..memory import MAX_SAMPLES, available_memory, format_bytes
 from .errors import CliError
 
 __all__ = [
@@ -27,10 +27,6 @@ FILM_BYTES_PER_PIXEL = 48
 MEMORY_FRACTION = 0.8
 
 
-#: Samples (pixels x spp) one render may take: Mitsuba 3.9.1's LLVM variants
-#: silently render a black image a little below 2**32 samples and crash when
-#: Mitsuba splits a larger render into passes; this many render correctly.
-MAX_SAMPLES = 2**32 - 2**24
 
 
 def check_render_budget(width: int, height: int, spp: int, available: int | None = None) -> None:

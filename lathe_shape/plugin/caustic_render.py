@@ -17,6 +17,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..memory import MAX_SAMPLES
 from .caustic_paths import CausticTracer, chain_length_limit
 from .deferred_solves import DeferredChainSolves, initial_capacity
 from .media_segments import heterogeneous_medium
@@ -30,12 +31,11 @@ NOTHING_TO_TRACE = ("no lathe with a Dirac-delta BSDF, or no light (area, point,
                     "environment)")
 
 
-#: Most light particles one render traces: the limit the command-line tools
-#: put on a render's camera samples, 2^32 - 2^24
-#: (:data:`lathe_shape.cli.budget.MAX_SAMPLES`, which this layer does not
-#: import; a test keeps the two equal). A billion particles did not end in
-#: hours on two cores.
-MAX_PARTICLES = 2**32 - 2**24
+#: Most light particles one render traces: the limit on a render's samples,
+#: :data:`~lathe_shape.memory.MAX_SAMPLES` (2^32 - 2^24), which the
+#: command-line tools put on its camera samples. A billion particles did not
+#: end in hours on two cores.
+MAX_PARTICLES = MAX_SAMPLES
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,18 @@ def _points_params(scene):
     return params, points_key(params, scene_lathes(scene)[0])
 
 
+def _summed_points_gradient(scene, spp: int = 4, seed: int = 1) -> np.ndarray:
+    """Reverse mode: the gradient of the image's sum with respect to the
+    lathe's points (flat, user order)."""
+    params, key = _points_params(scene)
+    value = params[key]
+    dr.enable_grad(value)
+    params.update()
+    image = mi.render(scene, params, spp=spp, seed=seed)
+    dr.backward(dr.sum(image, axis=None))
+    return np.array(dr.grad(value))
+
+
 # -- the parameter -----------------------------------------------------------
 
 def test_points_exposed_in_user_order():
@@ -141,13 +153,7 @@ def test_adam_keeps_the_axis_points_on_the_axis(kind):
 
 def test_invisible_lathe_has_zero_gradient():
     scene = lathe_scene(resolution=16, offset=(0.0, 0.0, 40.0))  # far above the view
-    params, key = _points_params(scene)
-    value = params[key]
-    dr.enable_grad(value)
-    params.update()
-    image = mi.render(scene, params, spp=4, seed=1)
-    dr.backward(dr.sum(image, axis=None))
-    assert np.all(np.array(dr.grad(value)) == 0.0)
+    assert np.all(_summed_points_gradient(scene) == 0.0)
 
 
 #: Tolerances on silhouette pixels: the outline term (edge sampling of the
@@ -541,13 +547,7 @@ def test_closed_bspline_gradient_lands_on_the_first_point_in_either_orientation(
     gradients = {}
     for name, profile in (("cw", RING_CLOCKWISE), ("ccw", RING_COUNTER_CLOCKWISE)):
         scene = lathe_scene(profile=profile, kind="bspline", resolution=16, reference="proxy")
-        params, key = _points_params(scene)
-        value = params[key]
-        dr.enable_grad(value)
-        params.update()
-        image = mi.render(scene, params, spp=4, seed=1)
-        dr.backward(dr.sum(image, axis=None))
-        gradients[name] = np.array(dr.grad(value)).reshape(-1, 2)
+        gradients[name] = _summed_points_gradient(scene).reshape(-1, 2)
     cw, ccw = gradients["cw"], gradients["ccw"]
     assert np.abs(cw[0]).max() > 0.5  # the first point moves the image
     assert np.all(cw[-1] == 0.0) and np.all(ccw[-1] == 0.0)
