@@ -16,13 +16,20 @@ below, starting from a hollow cylinder, from the three renders and their
 silhouettes (the glass black before white: what segmenting the photographs
 gives; ``--silhouette-weight`` weighs their loss, 0 leaves them out),
 taking back a step that raised the image loss above ``1 + --uphill``
-times the lowest so far; it prints the outer and the inner wall's RMS
-errors per iteration (defaults there: 120 iterations, 32x32, 8 spp, step
-0.02, smoothness 1e-3, silhouette weight 4, uphill 0.1).
+times the lowest so far. It makes one descent from each of ``--starts``
+(tumblers whose inside bottom is at those fractions of the height) and
+keeps the one whose renders agree best with the hidden glass's at 64x64
+pixels and 32 spp, from pixel samples no descent used; the segments that
+meet the axis fall towards it by at most ``--axis-slope`` per unit of
+radius (no narrow spike along the axis). It prints the outer and the
+inner wall's RMS errors per iteration, and every descent's end (defaults
+there: 120 iterations, 32x32, 8 spp, step 0.02, smoothness 1e-3,
+silhouette weight 4, uphill 0.1, starts 0.4 0.45 0.5, axis slope 1).
 
     python scripts/inverse_design.py [--kind polyline|bspline|hollow] [--iterations 60] [--resolution 32x32]
                                      [--spp 16] [--learning-rate 0.02] [--smoothness 3e-3]
-                                     [--spacing 3e-3] [--silhouette-weight 4] [--uphill 0.1] [--seed 0]
+                                     [--spacing 3e-3] [--silhouette-weight 4] [--uphill 0.1]
+                                     [--starts 0.4 0.45 0.5] [--axis-slope 1] [--seed 0]
                                      [-o inverse_out]
                                      [--variant llvm_ad_rgb]
 
@@ -74,6 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--uphill", type=float, default=0.1,
                         help="hollow only: a step that raises the image loss above (1 + this) times the "
                              "lowest so far is taken back (default: 0.1; a negative value: never)")
+    parser.add_argument("--starts", type=float, nargs="+", default=None, metavar="FRACTION",
+                        help="hollow only: one descent from a tumbler with its inside bottom at each of "
+                             "these fractions of the height (0 < f < 1); the one whose renders agree best "
+                             "is kept (default: 0.4 0.45 0.5)")
+    parser.add_argument("--axis-slope", type=float, default=1.0,
+                        help="hollow only: the segments that meet the axis fall towards it by at most this "
+                             "much per unit of radius (default: 1, 45 degrees; a negative value: any slope)")
     add_output_option(parser, default="inverse_out",
                       what="convergence.png and view_K_{target,before,after}.png")
     return parser
@@ -91,9 +105,20 @@ def square_resolution(text: str) -> int:
 
 def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     """``--kind hollow``: both walls of the clear wine glass."""
-    from lathe_shape.tools.inverse_glass import HIDDEN_HOLLOW, plot_hollow_convergence, recover_hollow
+    from lathe_shape.tools.inverse_glass import (
+        HIDDEN_HOLLOW,
+        START_BOTTOMS,
+        plot_hollow_convergence,
+        recover_hollow,
+    )
+
+    starts = tuple(args.starts) if args.starts else START_BOTTOMS
+    descent = iter(starts)
 
     def report(iteration: int, loss: float, errors: tuple[float, float]) -> None:
+        if iteration == 0:
+            print(f"descent from a tumbler with its inside bottom at {next(descent):g} of the height",
+                  flush=True)
         print(f"iteration {iteration:4d}  loss {loss:.6f}  profile error outer wall {100 * errors[0]:.3f}%, "
               f"inner wall {100 * errors[1]:.3f}% of height", flush=True)
 
@@ -101,7 +126,12 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     result = recover_hollow(target, n_outer, args.iterations, side, args.spp, args.learning_rate,
                             args.smoothness, args.spacing, seed=args.seed,
                             silhouette_weight=args.silhouette_weight,
-                            uphill=None if args.uphill < 0.0 else args.uphill, report=report)
+                            uphill=None if args.uphill < 0.0 else args.uphill, starts=starts,
+                            axis_slope=None if args.axis_slope < 0.0 else args.axis_slope, report=report)
+    for bottom, loss, (outer, inner), _ in result.descents:
+        kept = "  (kept)" if result.errors[-1] == (outer, inner) else ""
+        print(f"descent from inside bottom {bottom:g}: validation loss {loss:.6f}, "
+              f"outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height{kept}")
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
                             f"hollow wine glass: {side}x{side}, {args.spp} spp, three views")
     paths = write_result_images(result, out)
@@ -129,6 +159,12 @@ def inverse_design(args: argparse.Namespace) -> int:
         raise CliError(f"--silhouette-weight must be >= 0, got {args.silhouette_weight:g}")
     if not math.isfinite(args.uphill):
         raise CliError(f"--uphill must be finite, got {args.uphill:g}")
+    if not math.isfinite(args.axis_slope):
+        raise CliError(f"--axis-slope must be finite, got {args.axis_slope:g}")
+    for fraction in args.starts or ():
+        if not 0.0 < fraction < 1.0:
+            raise CliError(f"--starts must be fractions of the height between 0 and 1 (exclusive), "
+                           f"got {fraction:g}")
     check_at_least("--spp", args.spp, 1)
     side = square_resolution(args.resolution)
     select_variant(args.variant)

@@ -8,12 +8,18 @@ from __future__ import annotations
 
 import os
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 
 from lathe_shape.profiles import make_profile
 from lathe_shape.tools.inverse_glass import (
+    GLASS_VIEWS,
     HIDDEN_HOLLOW,
+    START_BOTTOMS,
+    VALIDATION_SEED,
+    _HollowLoss,
     hollow_cylinder_like,
     hollow_valid,
     project_hollow,
@@ -48,6 +54,72 @@ def test_projection_keeps_the_walls_apart():
         assert moved[0, 0] == 0.0 and moved[-1, 0] == 0.0
     # A projected valid profile is itself
     assert np.array_equal(project_hollow(target, n_outer, 0.02, 0.02), target)
+    assert np.array_equal(project_hollow(target, n_outer, 0.02, 0.02, max_axis_slope=1.0), target)
+
+
+def test_projection_limits_the_slope_at_the_axis():
+    # A narrow spike along the axis (the axis point 0.25 below a neighbour
+    # at radius 0.06, as recoveries ended in, unseen at 32x32 pixels) is
+    # raised to the slope limit; without a limit it stays
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    spiked = target.copy()
+    spiked[-2] = (0.06, 0.93)
+    spiked[-1, 1] = 0.68
+    spiked[1] = (0.06, 0.0)
+    spiked[0, 1] = -0.2
+    assert np.array_equal(project_hollow(spiked, n_outer, 0.02, 0.02), spiked)
+    moved = project_hollow(spiked, n_outer, 0.02, 0.02, max_axis_slope=1.0)
+    assert moved[-1, 1] == pytest.approx(0.93 - 0.06) and moved[0, 1] == pytest.approx(-0.06)
+    assert np.array_equal(moved[1:-1], spiked[1:-1])
+    assert hollow_valid(moved, n_outer, 0.02)
+    rng = np.random.default_rng(3)
+    start = hollow_cylinder_like(target, n_outer)
+    for _ in range(200):
+        moved = project_hollow(start + rng.normal(0.0, 0.05, start.shape), n_outer, 0.02, 0.02, 0.5)
+        assert hollow_valid(moved, n_outer, 0.02)
+        inner_rise = moved[-2, 1] - moved[-1, 1]
+        outer_rise = moved[1, 1] - moved[0, 1]
+        assert inner_rise <= 0.5 * moved[-2, 0] + 1e-12 and outer_rise <= 0.5 * moved[1, 0] + 1e-12
+
+
+def test_recover_hollow_refuses_bad_starts():
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    for starts in ((), (0.4, 1.0), (0.0,), (float("nan"),)):
+        with pytest.raises(ValueError) as error:
+            recover_hollow(target, n_outer, starts=starts)
+        assert str(error.value) == (
+            "recover_hollow: starts must be fractions of the height strictly between 0 and 1 (one descent "
+            f"from each), got {tuple(starts)!r}")
+
+
+@pytest.mark.slow
+def test_recovery_keeps_the_descent_whose_validation_renders_agree_best():
+    # Two short descents from different inside bottoms; the kept one is
+    # the one whose validation renders (other pixel samples, renders only)
+    # have the lowest loss, recomputed here from a fresh scene
+    target, n_outer = HIDDEN_HOLLOW["wine_glass"]
+    starts, validation = (0.4, 0.55), (16, 4)
+    result = recover_hollow(target, n_outer, iterations=3, resolution=16, spp=2, seed=5, starts=starts,
+                            validation=validation)
+    assert [descent.bottom for descent in result.descents] == list(starts)
+    losses = [descent.validation_loss for descent in result.descents]
+    assert all(np.isfinite(losses)) and losses[0] != losses[1]
+    kept = int(np.argmin(losses))
+    assert result.validation_loss == losses[kept]
+    assert result.errors[-1] == result.descents[kept].errors
+    assert np.array_equal(result.points, result.descents[kept].points)
+    recovered = wall_rms_errors(result.points, target, n_outer)
+    assert recovered == pytest.approx(result.descents[kept].errors, abs=1e-12)
+    judge = _HollowLoss(target, *validation, views=GLASS_VIEWS, max_depth=8,
+                        seed=5 + VALIDATION_SEED, levels=5, frequency=2.5, silhouette_weight=0.0,
+                        min_thickness=0.02)
+    with dr.suspend_grad():
+        again = float(np.array(judge(mi.Float(result.points.ravel().astype(np.float32))))[0])
+    assert again == pytest.approx(result.validation_loss, rel=1e-5)
+    # The start's inside bottom is where the kept descent began
+    start = hollow_cylinder_like(target, n_outer, bottom=starts[kept])
+    assert wall_rms_errors(start, target, n_outer) == pytest.approx(result.start_errors, abs=1e-12)
+    assert START_BOTTOMS == (0.4, 0.45, 0.5)
 
 
 @pytest.mark.slow
@@ -63,7 +135,7 @@ def test_short_hollow_recovery_cuts_both_errors_and_stays_valid():
     errors = {}
     for weight in (4.0, 0.0):
         result = recover_hollow(target, n_outer, iterations=20, resolution=32, spp=8,
-                                silhouette_weight=weight)
+                                silhouette_weight=weight, starts=(0.4,))
         start_outer, start_inner = result.start_errors
         errors[weight] = outer, inner = result.errors[-1]
         print(f"hollow glass, short, silhouette weight {weight:g}: outer {100 * start_outer:.2f}% -> "
@@ -89,9 +161,12 @@ def test_short_hollow_recovery_cuts_both_errors_and_stays_valid():
 
 @LONG
 def test_long_hollow_recovery():
-    # 120 steps, three seeds, silhouette weight 4, uphill guard 0.1 (the
-    # script's defaults). Measured: outer 0.64 / 0.62 / 0.57%, inner 0.99 /
-    # 0.78 / 1.12% of the height
+    # The script's defaults: three descents of 120 steps (silhouette weight
+    # 4, uphill guard 0.1, axis slope 1) from inside bottoms at 0.4, 0.45
+    # and 0.5 of the height, the one whose validation renders agree best
+    # kept. Measured (2026-12-04): outer 0.37 / 0.66 / 0.44%, inner 0.66 /
+    # 0.50 / 0.43% of the height, about 100 s each; 17 of seeds 0-17 under
+    # 1% on both walls (docs/differentiable.md)
     target, n_outer = HIDDEN_HOLLOW["wine_glass"]
     for seed in range(3):
         result = recover_hollow(target, n_outer, iterations=120, resolution=32, spp=8, seed=seed)
@@ -99,4 +174,4 @@ def test_long_hollow_recovery():
         print(f"hollow glass, long, seed {seed}: outer {100 * outer:.2f}%, inner {100 * inner:.2f}% "
               f"of height, {result.seconds:.1f} s")
         assert all(result.valid)
-        assert outer < 0.01 and inner < 0.0125
+        assert outer < 0.01 and inner < 0.01

@@ -44,6 +44,17 @@ def test_inverse_design_output_and_resolution(tmp_path, capsys):
                          "--variant", VARIANT])
     assert code == 2
     assert capsys.readouterr().err == "inverse_design.py: error: --uphill must be finite, got nan\n"
+    code = inverse.main(["--kind", "hollow", "--axis-slope", "inf", "-o", str(tmp_path / "no"),
+                         "--variant", VARIANT])
+    assert code == 2
+    assert capsys.readouterr().err == "inverse_design.py: error: --axis-slope must be finite, got inf\n"
+    for bad in ("1.5", "0", "nan"):
+        code = inverse.main(["--kind", "hollow", "--starts", "0.4", bad, "-o", str(tmp_path / "no"),
+                             "--variant", VARIANT])
+        assert code == 2
+        assert capsys.readouterr().err == (
+            f"inverse_design.py: error: --starts must be fractions of the height between 0 and 1 "
+            f"(exclusive), got {float(bad):g}\n")
     assert not (tmp_path / "no").exists()
     out = tmp_path / "out"
     code = inverse.main(["--iterations", "1", "--resolution", "8", "--spp", "1", "-o", str(out),
