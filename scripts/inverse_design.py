@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="hollow only: one descent from a tumbler with its inside bottom at each of "
                              "these fractions of the height (0 < f < 1); the one whose renders agree best "
                              "is kept (default: 0.4 0.45 0.5)")
-    parser.add_argument("--axis-slope", type=float, default=1.0,
+    parser.add_argument("--axis-slope", type=float, default=None,
                         help="hollow only: the segments that meet the axis fall towards it by at most this "
                              "much per unit of radius (default: 1, 45 degrees; a negative value: any slope)")
     add_output_option(parser, default="inverse_out",
@@ -106,6 +106,7 @@ def square_resolution(text: str) -> int:
 def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     """``--kind hollow``: both walls of the clear wine glass."""
     from lathe_shape.tools.inverse_glass import (
+        AXIS_SLOPE,
         HIDDEN_HOLLOW,
         START_BOTTOMS,
         plot_hollow_convergence,
@@ -113,6 +114,7 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     )
 
     starts = tuple(args.starts) if args.starts else START_BOTTOMS
+    axis_slope = AXIS_SLOPE if args.axis_slope is None else None if args.axis_slope < 0.0 else args.axis_slope
     descent = iter(starts)
 
     def report(iteration: int, loss: float, errors: tuple[float, float]) -> None:
@@ -127,11 +129,12 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
                             args.smoothness, args.spacing, seed=args.seed,
                             silhouette_weight=args.silhouette_weight,
                             uphill=None if args.uphill < 0.0 else args.uphill, starts=starts,
-                            axis_slope=None if args.axis_slope < 0.0 else args.axis_slope, report=report)
-    for bottom, loss, (outer, inner), _ in result.descents:
-        kept = "  (kept)" if result.errors[-1] == (outer, inner) else ""
-        print(f"descent from inside bottom {bottom:g}: validation loss {loss:.6f}, "
-              f"outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height{kept}")
+                            axis_slope=axis_slope, report=report)
+    if len(result.descents) > 1:
+        for bottom, loss, (outer, inner), points in result.descents:
+            kept = "  (kept)" if points is result.points else ""
+            print(f"descent from inside bottom {bottom:g}: validation loss {loss:.6f}, "
+                  f"outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height{kept}")
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
                             f"hollow wine glass: {side}x{side}, {args.spp} spp, three views")
     paths = write_result_images(result, out)
@@ -159,7 +162,7 @@ def inverse_design(args: argparse.Namespace) -> int:
         raise CliError(f"--silhouette-weight must be >= 0, got {args.silhouette_weight:g}")
     if not math.isfinite(args.uphill):
         raise CliError(f"--uphill must be finite, got {args.uphill:g}")
-    if not math.isfinite(args.axis_slope):
+    if args.axis_slope is not None and not math.isfinite(args.axis_slope):
         raise CliError(f"--axis-slope must be finite, got {args.axis_slope:g}")
     for fraction in args.starts or ():
         if not 0.0 < fraction < 1.0:

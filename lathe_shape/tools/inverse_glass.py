@@ -54,8 +54,8 @@ Where a descent ends depends on where it starts, and renders at a finer
 resolution from other pixel samples tell the good ends from the bad, so
 :func:`recover_hollow` makes three descents (inside bottoms at 0.4, 0.45
 and 0.5 of the height) and keeps the one whose validation renders agree
-best; and :func:`project_hollow` keeps the segments that meet the axis
-from falling more steeply than 45 degrees (the bad ends left were narrow
+best; and it has :func:`project_hollow` keep the segments that meet the
+axis from falling more steeply than 45 degrees (the bad ends left were narrow
 spikes of the axis point into the stem, unseen at 32x32). Both walls then
 end under 1% of the height in 17 of seeds 0-17 (about 100 s each).
 """
@@ -195,7 +195,7 @@ def project_hollow(points: np.ndarray, n_outer: int, min_radius: float, min_thic
     def limit_axis_slopes():
         if max_axis_slope is not None:
             outer[0, 1] = max(outer[0, 1], outer[1, 1] - max_axis_slope * outer[1, 0])
-            inner[-1, 1] = max(inner[-1, 1], inner[-2, 1] - max_axis_slope * inner[-2, 0])
+            inner[-1, 1] = max(inner[-1, 1], inner[-2, 1] - max_axis_slope * max(inner[-2, 0], 0.0))
 
     limit_axis_slopes()
     inner[:, 1] = np.maximum(inner[:, 1], outer[0, 1] + min_thickness)
@@ -429,9 +429,10 @@ class HollowResult:
     """The recovered points; per iteration the loss, the per-wall profile
     errors ``(outer, inner)``, whether the profile was valid, and the wall
     time; the images of the targets, the start and the end; the loss of
-    the recovered points' validation renders; and the end of every descent
-    :func:`recover_hollow` made (:class:`Descent`; this result is the one
-    of lowest validation loss)."""
+    the recovered points' validation renders (inf where there was one
+    descent: nothing to choose, no validation renders); and the end of
+    every descent :func:`recover_hollow` made (:class:`Descent`; this
+    result is the one of lowest validation loss)."""
 
     points: np.ndarray
     n_outer: int
@@ -573,40 +574,57 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
     if not starts or not all(0.0 < bottom < 1.0 for bottom in starts):
         raise ValueError(f"recover_hollow: starts must be fractions of the height strictly between 0 and 1 "
                          f"(one descent from each), got {tuple(starts)!r}")
+    if axis_slope is not None and not (math.isfinite(axis_slope) and axis_slope >= 0.0):
+        raise ValueError(f"recover_hollow: axis_slope must be None or finite and >= 0, got {axis_slope!r}")
+    if len(starts) > 1 and not (validation[0] >= 16 and validation[1] >= 1):
+        raise ValueError(f"recover_hollow: validation must be (resolution >= 16, spp >= 1), "
+                         f"got {validation!r}")
     target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
     height = float(np.ptp(target[:, 1]))
     min_radius, min_thickness = 0.01 * height, 0.01 * height
+    # Every start, checked before anything renders (each its own draw of
+    # the jitter, the same whichever other starts there are)
+    begins = []
+    for bottom in starts:
+        current = hollow_cylinder_like(target, n_outer, bottom=bottom)
+        if start_jitter > 0.0:
+            rng = np.random.default_rng((seed, round(1e6 * bottom)))
+            current = project_hollow(current + rng.normal(0.0, start_jitter * height, current.shape), n_outer,
+                                     min_radius, min_thickness, axis_slope)
+        if not hollow_valid(current, n_outer, min_thickness):
+            raise ValueError(f"recover_hollow: the tumbler with its inside bottom at {bottom:g} of the "
+                             f"height is not a valid hollow profile (wall under 1% of the height)")
+        begins.append(current)
     image_loss = _HollowLoss(target, resolution, spp, views, max_depth, seed, levels, frequency,
                              silhouette_weight, min_thickness)
     judge = None
     if len(starts) > 1:
         judge = _HollowLoss(target, validation[0], validation[1], views, max_depth, seed + VALIDATION_SEED,
                             levels, frequency, 0.0, min_thickness)
-    rng = np.random.default_rng(seed)
     kept: HollowResult | None = None
     descents = []
-    for bottom in starts:
-        current = hollow_cylinder_like(target, n_outer, bottom=bottom)
-        if start_jitter > 0.0:
-            current = project_hollow(current + rng.normal(0.0, start_jitter * height, current.shape), n_outer,
-                                     min_radius, min_thickness)
-        if not hollow_valid(current, n_outer, min_thickness):
-            raise ValueError(f"recover_hollow: the tumbler with its inside bottom at {bottom:g} of the "
-                             f"height is not a valid hollow profile (wall under 1% of the height)")
+    for bottom, current in zip(starts, begins, strict=True):
         result = _descend(image_loss, current, target, n_outer, iterations, learning_rate, smoothness,
                           spacing, uphill, min_radius, axis_slope, report)
         if judge is not None:
             with dr.suspend_grad():
-                result.validation_loss = _value(judge(mi.Float(result.points.ravel().astype(np.float32))))
+                loss = _value(judge(mi.Float(result.points.ravel().astype(np.float32))))
+            result.validation_loss = loss if math.isfinite(loss) else math.inf  # (a NaN never wins)
         descents.append(Descent(bottom, result.validation_loss, result.errors[-1], result.points))
         if kept is None or result.validation_loss < kept.validation_loss:
             kept = result
     kept.descents = descents
-    image_loss.write(kept.points, n_outer)
+    _write_or_raise(image_loss, kept.points, n_outer)
     kept.targets = [np.array(image) for image in image_loss.targets]
     kept.after = image_loss.images()
     kept.seconds = time.perf_counter() - clock
     return kept
+
+
+def _write_or_raise(image_loss: _HollowLoss, points: np.ndarray, n_outer: int) -> None:
+    if not image_loss.write(points, n_outer):
+        raise ValueError("recover_hollow: the lathe refused a profile that passed hollow_valid "
+                         f"(points {np.round(points, 4).tolist()})")
 
 
 def _descend(image_loss: _HollowLoss, current: np.ndarray, target: np.ndarray, n_outer: int, iterations: int,
@@ -616,7 +634,7 @@ def _descend(image_loss: _HollowLoss, current: np.ndarray, target: np.ndarray, n
     min_thickness = image_loss.min_thickness
     result = HollowResult(current, n_outer)
     result.start_errors = wall_rms_errors(current, target, n_outer)
-    image_loss.write(current, n_outer)
+    _write_or_raise(image_loss, current, n_outer)
     result.before = image_loss.images()
     optimizer = mi.ad.Adam(lr=learning_rate)
     optimizer["points"] = mi.Float(current.ravel().astype(np.float32))

@@ -90,6 +90,14 @@ def test_recover_hollow_refuses_bad_starts():
         assert str(error.value) == (
             "recover_hollow: starts must be fractions of the height strictly between 0 and 1 (one descent "
             f"from each), got {tuple(starts)!r}")
+    for slope in (-0.5, float("nan"), float("inf")):
+        with pytest.raises(ValueError) as error:
+            recover_hollow(target, n_outer, axis_slope=slope)
+        assert str(error.value) == (
+            f"recover_hollow: axis_slope must be None or finite and >= 0, got {slope!r}")
+    with pytest.raises(ValueError) as error:
+        recover_hollow(target, n_outer, validation=(8, 4))
+    assert str(error.value) == "recover_hollow: validation must be (resolution >= 16, spp >= 1), got (8, 4)"
 
 
 @pytest.mark.slow
@@ -98,7 +106,7 @@ def test_recovery_keeps_the_descent_whose_validation_renders_agree_best():
     # the one whose validation renders (other pixel samples, renders only)
     # have the lowest loss, recomputed here from a fresh scene
     target, n_outer = HIDDEN_HOLLOW["wine_glass"]
-    starts, validation = (0.4, 0.55), (16, 4)
+    starts, validation = (0.4, 0.55), (24, 4)
     result = recover_hollow(target, n_outer, iterations=3, resolution=16, spp=2, seed=5, starts=starts,
                             validation=validation)
     assert [descent.bottom for descent in result.descents] == list(starts)
@@ -116,6 +124,12 @@ def test_recovery_keeps_the_descent_whose_validation_renders_agree_best():
     with dr.suspend_grad():
         again = float(np.array(judge(mi.Float(result.points.ravel().astype(np.float32))))[0])
     assert again == pytest.approx(result.validation_loss, rel=1e-5)
+    # The images are the descent's own (16x16, its pixel samples), of the
+    # kept points
+    again = _HollowLoss(target, 16, 2, GLASS_VIEWS, 8, 5, 5, 2.5, 0.0, 0.02)
+    assert again.write(result.points, n_outer)
+    for image, fresh in zip(result.after, again.images(), strict=True):
+        assert image.shape[:2] == (16, 16) and np.array_equal(image, fresh)
     # The start's inside bottom is where the kept descent began
     start = hollow_cylinder_like(target, n_outer, bottom=starts[kept])
     assert wall_rms_errors(start, target, n_outer) == pytest.approx(result.start_errors, abs=1e-12)
