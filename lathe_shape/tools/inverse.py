@@ -172,6 +172,11 @@ class InverseResult:
     targets: list[np.ndarray] = field(default_factory=list)
 
 
+def _scalar(loss: mi.Float) -> float:
+    """A one-entry (loss) array's value, detached from AD."""
+    return float(np.array(dr.detach(loss)).ravel()[0])
+
+
 def _write_points(params, key: str, points: np.ndarray) -> bool:
     """Set the points (re-validated); False when the profile is refused."""
     try:
@@ -259,7 +264,7 @@ def recover_profile(target: np.ndarray, kind: str = "polyline", iterations: int 
             proposal = project_profile(np.array(optimizer["points"]), min_radius)
             current = _step_points(params, key, current, proposal)
             optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
-            result.losses.append(float(np.array(dr.detach(loss)).ravel()[0]))
+            result.losses.append(_scalar(loss))
             result.errors.append(profile_rms_error(current, target, kind))
             if report is not None:
                 report(len(result.losses) - 1, result.losses[-1], result.errors[-1])

@@ -77,6 +77,7 @@ from .diff_scenes import profile_string
 from .gradients import points_key
 from .inverse import (
     _distance_to_chain,
+    _scalar,
     _smoothness,
     _spacing,
     _write_points,
@@ -449,17 +450,6 @@ class HollowResult:
     descents: list[Descent] = field(default_factory=list)
 
 
-def _write(targets: list[tuple[object, str]], points: np.ndarray, n_outer: int, min_thickness: float) -> bool:
-    """Set the points of every ``(params, key)`` in ``targets`` if they make
-    a valid hollow profile (and the lathe accepts them); False (nothing
-    written) otherwise."""
-    if not hollow_valid(points, n_outer, min_thickness) or not _write_points(*targets[0], points):
-        return False
-    for params, key in targets[1:]:
-        _write_points(params, key, points)
-    return True
-
-
 #: :func:`recover_hollow`'s starts: the height of the inside bottom of the
 #: tumbler each descent starts from, as a fraction of the glass's height.
 START_BOTTOMS = (0.4, 0.45, 0.5)
@@ -487,12 +477,10 @@ class _HollowLoss:
 
         self.spp, self.seed, self.levels, self.weight = spp, seed, levels, silhouette_weight
         self.min_thickness = min_thickness
-        reference = hollow_scene(target, resolution, views, max_depth, frequency=frequency)
-        self.targets = render_views(reference, spp, seed)
-        del reference
         # The scenes are made from the target (whose height places the
-        # cameras) and given other points afterwards
+        # cameras), render the targets, and are given other points afterwards
         self.scene = hollow_scene(target, resolution, views, max_depth, frequency=frequency)
+        self.targets = render_views(self.scene, spp, seed)
         self.params = mi.traverse(self.scene)
         self.key = points_key(self.params, scene_lathes(self.scene)[0])
         self.written = [(self.params, self.key)]
@@ -505,8 +493,15 @@ class _HollowLoss:
             self.written.append((self.mask_params, self.mask_key))
 
     def write(self, points: np.ndarray, n_outer: int) -> bool:
-        """Set ``points`` in every scene if valid (:func:`_write`)."""
-        return _write(self.written, points, n_outer, self.min_thickness)
+        """Set ``points`` in every scene if they make a valid hollow profile
+        (and the lathe accepts them); False (nothing written) otherwise."""
+        if not hollow_valid(points, n_outer, self.min_thickness):
+            return False
+        if not _write_points(*self.written[0], points):
+            return False
+        for params, key in self.written[1:]:
+            _write_points(params, key, points)
+        return True
 
     def images(self) -> list[np.ndarray]:
         """The renders of the points last written."""
@@ -526,10 +521,6 @@ class _HollowLoss:
                 render_views(self.mask_scene, self.spp, self.seed, self.mask_params), self.mask_targets,
                 self.levels)
         return loss
-
-
-def _value(loss: mi.Float) -> float:
-    return float(np.array(dr.detach(loss)).ravel()[0])
 
 
 def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resolution: int = 32, spp: int = 8,
@@ -609,7 +600,7 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
                           spacing, uphill, min_radius, axis_slope, report)
         if judge is not None:
             with dr.suspend_grad():
-                loss = _value(judge(mi.Float(result.points.ravel().astype(np.float32))))
+                loss = _scalar(judge(mi.Float(result.points.ravel().astype(np.float32))))
             result.validation_loss = loss if math.isfinite(loss) else math.inf  # (a NaN never wins)
         descents.append(Descent(bottom, result.validation_loss, result.errors[-1], result.points))
         if kept is None or result.validation_loss < kept.validation_loss:
@@ -652,7 +643,7 @@ def _descend(image_loss: _HollowLoss, current: np.ndarray, target: np.ndarray, n
         decay = 0.1 ** (iteration / max(iterations - 1, 1))
         optimizer.set_learning_rate(learning_rate * decay * step_scale)
         loss_now = image_loss(optimizer["points"])
-        value = _value(loss_now)
+        value = _scalar(loss_now)
         if uphill is not None and value > (1.0 + uphill) * best_loss:
             # The last step went uphill (the gradient's bias: eq. 30's held
             # vertices, outlines seen through glass): back to the best
