@@ -21,15 +21,19 @@ times the lowest so far. It makes one descent from each of ``--starts``
 keeps the one whose renders agree best with the hidden glass's at 64x64
 pixels and 32 spp, from pixel samples no descent used; the segments that
 meet the axis fall towards it by at most ``--axis-slope`` per unit of
-radius (no narrow spike along the axis). It prints the outer and the
-inner wall's RMS errors per iteration, and every descent's end (defaults
-there: 120 iterations, 32x32, 8 spp, step 0.02, smoothness 1e-3,
-silhouette weight 4, uphill 0.1, starts 0.4 0.45 0.5, axis slope 1).
+radius (no narrow spike along the axis). The kept descent then goes on
+for ``--refine-steps`` steps at 64x64 pixels and 64 spp, with new pixel
+samples every step and 0.15 times the step size (0: no refinement). It
+prints the outer and the inner wall's RMS errors per iteration, and every
+descent's end (defaults there: 120 iterations, 32x32, 8 spp, step 0.02,
+smoothness 1e-3, silhouette weight 4, uphill 0.1, starts 0.4 0.45 0.5,
+axis slope 1, 100 refinement steps).
 
     python scripts/inverse_design.py [--kind polyline|bspline|hollow] [--iterations 60] [--resolution 32x32]
                                      [--spp 16] [--learning-rate 0.02] [--smoothness 3e-3]
                                      [--spacing 3e-3] [--silhouette-weight 4] [--uphill 0.1]
-                                     [--starts 0.4 0.45 0.5] [--axis-slope 1] [--seed 0]
+                                     [--starts 0.4 0.45 0.5] [--axis-slope 1] [--refine-steps 100]
+                                     [--seed 0]
                                      [-o inverse_out]
                                      [--variant llvm_ad_rgb]
 
@@ -88,6 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--axis-slope", type=float, default=None,
                         help="hollow only: the segments that meet the axis fall towards it by at most this "
                              "much per unit of radius (default: 1, 45 degrees; a negative value: any slope)")
+    parser.add_argument("--refine-steps", type=int, default=None,
+                        help="hollow only: steps of the kept descent's refinement at 64x64 pixels, 64 spp, "
+                             "new pixel samples every step (default: 100; 0: none)")
     add_output_option(parser, default="inverse_out",
                       what="convergence.png and view_K_{target,before,after}.png")
     return parser
@@ -108,6 +115,7 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
     from lathe_shape.tools.inverse_glass import (
         AXIS_SLOPE,
         HIDDEN_HOLLOW,
+        REFINE,
         START_BOTTOMS,
         plot_hollow_convergence,
         recover_hollow,
@@ -115,12 +123,15 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
 
     starts = tuple(args.starts) if args.starts else START_BOTTOMS
     axis_slope = AXIS_SLOPE if args.axis_slope is None else None if args.axis_slope < 0.0 else args.axis_slope
-    descent = iter(starts)
+    steps = REFINE[2] if args.refine_steps is None else args.refine_steps
+    refine = (*REFINE[:2], steps) if steps else None
+    headers = iter([*(f"descent from a tumbler with its inside bottom at {bottom:g} of the height"
+                      for bottom in starts),
+                    f"refinement of the kept descent at {REFINE[0]}x{REFINE[0]} pixels, {REFINE[1]} spp"])
 
     def report(iteration: int, loss: float, errors: tuple[float, float]) -> None:
         if iteration == 0:
-            print(f"descent from a tumbler with its inside bottom at {next(descent):g} of the height",
-                  flush=True)
+            print(next(headers), flush=True)
         print(f"iteration {iteration:4d}  loss {loss:.6f}  profile error outer wall {100 * errors[0]:.3f}%, "
               f"inner wall {100 * errors[1]:.3f}% of height", flush=True)
 
@@ -129,10 +140,10 @@ def hollow_design(args: argparse.Namespace, side: int, out: str) -> int:
                             args.smoothness, args.spacing, seed=args.seed,
                             silhouette_weight=args.silhouette_weight,
                             uphill=None if args.uphill < 0.0 else args.uphill, starts=starts,
-                            axis_slope=axis_slope, report=report)
+                            axis_slope=axis_slope, refine=refine, report=report)
     if len(result.descents) > 1:
-        for bottom, loss, (outer, inner), points in result.descents:
-            kept = "  (kept)" if points is result.points else ""
+        for k, (bottom, loss, (outer, inner), _) in enumerate(result.descents):
+            kept = "  (kept)" if k == result.kept else ""
             print(f"descent from inside bottom {bottom:g}: validation loss {loss:.6f}, "
                   f"outer wall {100 * outer:.3f}%, inner wall {100 * inner:.3f}% of height{kept}")
     plot_hollow_convergence(result, os.path.join(out, "convergence.png"),
@@ -168,6 +179,7 @@ def inverse_design(args: argparse.Namespace) -> int:
         if not 0.0 < fraction < 1.0:
             raise CliError(f"--starts must be fractions of the height between 0 and 1 (exclusive), "
                            f"got {fraction:g}")
+    check_at_least("--refine-steps", args.refine_steps, 0)
     check_at_least("--spp", args.spp, 1)
     side = square_resolution(args.resolution)
     select_variant(args.variant)

@@ -279,9 +279,11 @@ def plot_convergence(result: InverseResult, path: str, title: str = "") -> None:
     plot_losses(result.losses, {"profile RMS error / height": result.errors}, path, title)
 
 
-def plot_losses(losses: list[float], errors: dict[str, list[float]], path: str, title: str = "") -> None:
+def plot_losses(losses: list[float], errors: dict[str, list[float]], path: str, title: str = "",
+                mark: tuple[int, str] | None = None) -> None:
     """The image loss and each named error series per iteration (log
-    scale), with the 1% line, as a PNG."""
+    scale), with the 1% line, as a PNG; ``mark`` (iteration, label): a
+    vertical line there."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -292,6 +294,8 @@ def plot_losses(losses: list[float], errors: dict[str, list[float]], path: str, 
     for label, series in errors.items():
         ax.semilogy(series, label=label)
     ax.axhline(0.01, color="gray", lw=0.8, ls="--", label="1% of height")
+    if mark is not None:
+        ax.axvline(mark[0], color="black", lw=0.8, ls=":", label=mark[1])
     ax.set_xlabel("iteration")
     ax.set_title(title, fontsize=9)
     ax.grid(True, which="both", alpha=0.3)

@@ -35,41 +35,52 @@ def test_inverse_design_hollow_passes_its_options_and_lists_the_descents(tmp_pat
 
     calls = []
 
-    def fake_recover(target, n_outer, *args, starts, axis_slope, report, **kwargs):
-        calls.append((starts, axis_slope, kwargs["uphill"]))
+    def fake_recover(target, n_outer, *args, starts, axis_slope, refine, report, **kwargs):
+        calls.append((starts, axis_slope, kwargs["uphill"], refine))
         ends = [np.asarray(target) + 0.01 * k for k in range(len(starts))]
         descents = []
         for k, bottom in enumerate(starts):
             report(0, 1.0 + k, (0.01 * k, 0.02 * k))
             loss = 0.5 - 0.1 * k if k < 2 else 0.9
             descents.append(inverse_glass.Descent(bottom, loss, (0.01 * k, 0.02 * k), ends[k]))
+        if refine is not None:
+            report(0, 0.5, (0.005, 0.005))
         kept = 1 if len(starts) > 1 else 0
         image = np.zeros((8, 8, 3), dtype=np.float32)
         return inverse_glass.HollowResult(ends[kept], n_outer, losses=[1.0], errors=[descents[kept].errors],
                                           valid=[True], descents=descents, before=[image], after=[image],
-                                          targets=[image])
+                                          targets=[image], kept=kept)
 
     monkeypatch.setattr(inverse_glass, "recover_hollow", fake_recover)
     inverse = load_script("inverse_design.py")
     code = inverse.main(["--kind", "hollow", "--starts", "0.3", "0.6", "0.7", "--axis-slope", "-1",
                          "--uphill", "-1", "-o", str(tmp_path / "a"), "--variant", VARIANT])
     out = capsys.readouterr().out
-    assert code == 0 and calls[-1] == ((0.3, 0.6, 0.7), None, None)
-    assert [line for line in out.splitlines() if line.startswith("descent from a tumbler")] == [
-        f"descent from a tumbler with its inside bottom at {f} of the height" for f in ("0.3", "0.6", "0.7")]
+    assert code == 0 and calls[-1] == ((0.3, 0.6, 0.7), None, None, inverse_glass.REFINE)
+    headers = [line for line in out.splitlines() if line.startswith(("descent from a tumbler", "refinement"))]
+    assert headers == [
+        *(f"descent from a tumbler with its inside bottom at {f} of the height"
+          for f in ("0.3", "0.6", "0.7")),
+        "refinement of the kept descent at 64x64 pixels, 64 spp"]
     listed = [line for line in out.splitlines() if line.startswith("descent from inside bottom")]
     assert len(listed) == 3 and [line.endswith("(kept)") for line in listed] == [False, True, False]
     assert listed[1] == ("descent from inside bottom 0.6: validation loss 0.400000, outer wall 1.000%, "
                          "inner wall 2.000% of height  (kept)")
-    code = inverse.main(["--kind", "hollow", "--starts", "0.45", "-o", str(tmp_path / "b"),
-                         "--variant", VARIANT])
+    code = inverse.main(["--kind", "hollow", "--starts", "0.45", "--refine-steps", "0", "-o",
+                         str(tmp_path / "b"), "--variant", VARIANT])
     out = capsys.readouterr().out
-    assert code == 0 and calls[-1] == ((0.45,), inverse_glass.AXIS_SLOPE, 0.1)
+    assert code == 0 and calls[-1] == ((0.45,), inverse_glass.AXIS_SLOPE, 0.1, None)
     assert "descent from inside bottom" not in out  # one descent: nothing chosen
+    assert "refinement" not in out
     code = inverse.main(["--kind", "hollow", "--axis-slope", "0.5", "-o", str(tmp_path / "c"),
                          "--variant", VARIANT])
     capsys.readouterr()
-    assert code == 0 and calls[-1] == (inverse_glass.START_BOTTOMS, 0.5, 0.1)
+    assert code == 0 and calls[-1] == (inverse_glass.START_BOTTOMS, 0.5, 0.1, (64, 64, 100))
+    code = inverse.main(["--kind", "hollow", "--refine-steps", "7", "-o", str(tmp_path / "d"),
+                         "--variant", VARIANT])
+    capsys.readouterr()
+    assert code == 0
+    assert calls[-1] == (inverse_glass.START_BOTTOMS, inverse_glass.AXIS_SLOPE, 0.1, (64, 64, 7))
 
 
 @pytest.mark.slow
@@ -94,6 +105,10 @@ def test_inverse_design_output_and_resolution(tmp_path, capsys):
                          "--variant", VARIANT])
     assert code == 2
     assert capsys.readouterr().err == "inverse_design.py: error: --axis-slope must be finite, got inf\n"
+    code = inverse.main(["--kind", "hollow", "--refine-steps", "-2", "-o", str(tmp_path / "no"),
+                         "--variant", VARIANT])
+    assert code == 2
+    assert capsys.readouterr().err == "inverse_design.py: error: --refine-steps must be at least 0, got -2\n"
     for bad in ("1.5", "0", "nan"):
         code = inverse.main(["--kind", "hollow", "--starts", "0.4", bad, "-o", str(tmp_path / "no"),
                              "--variant", VARIANT])
