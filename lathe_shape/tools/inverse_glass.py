@@ -659,6 +659,10 @@ def recover_hollow(target: np.ndarray, n_outer: int, iterations: int = 60, resol
         kept.errors += fine.errors
         kept.valid += fine.valid
         kept.points = fine.points
+    # The images of the kept descent's start and end (the descents' pixel
+    # samples), rendered for it alone
+    _write_or_raise(image_loss, begins[kept.kept], n_outer)
+    kept.before = image_loss.images()
     _write_or_raise(image_loss, kept.points, n_outer)
     kept.targets = [np.array(image) for image in image_loss.targets]
     kept.after = image_loss.images()
@@ -675,12 +679,12 @@ def _write_or_raise(image_loss: _HollowLoss, points: np.ndarray, n_outer: int) -
 def _descend(image_loss: _HollowLoss, current: np.ndarray, target: np.ndarray, n_outer: int, iterations: int,
              learning_rate: float, smoothness: float, spacing: float, uphill: float | None, min_radius: float,
              axis_slope: float | None, report) -> HollowResult:
-    """One descent of :func:`recover_hollow` from the valid ``current``."""
+    """One descent of :func:`recover_hollow` from the valid ``current``
+    (its images left to the caller)."""
     min_thickness = image_loss.min_thickness
     result = HollowResult(current, n_outer)
     result.start_errors = wall_rms_errors(current, target, n_outer)
     _write_or_raise(image_loss, current, n_outer)
-    result.before = image_loss.images()
     optimizer = mi.ad.Adam(lr=learning_rate)
     optimizer["points"] = mi.Float(current.ravel().astype(np.float32))
     best_loss, best_points, step_scale = math.inf, current, 1.0  # (the uphill guard)

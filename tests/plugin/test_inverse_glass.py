@@ -139,9 +139,13 @@ def test_recovery_keeps_the_descent_whose_validation_renders_agree_best_and_refi
     assert again.write(result.points, n_outer)
     for image, fresh in zip(result.after, again.images(), strict=True):
         assert image.shape[:2] == (16, 16) and np.array_equal(image, fresh)
-    # The start's inside bottom is where the kept descent began
+    # The start's inside bottom is where the kept descent began, and the
+    # images before are of that start
     start = hollow_cylinder_like(target, n_outer, bottom=starts[kept])
     assert wall_rms_errors(start, target, n_outer) == pytest.approx(result.start_errors, abs=1e-12)
+    assert again.write(start, n_outer)
+    for image, fresh in zip(result.before, again.images(), strict=True):
+        assert image.shape[:2] == (16, 16) and np.array_equal(image, fresh)
     assert START_BOTTOMS == (0.4, 0.45, 0.5)
 
 
