@@ -93,22 +93,14 @@ def test_inverse_design_output_and_resolution(tmp_path, capsys):
     code = inverse.main(["--resolution", "4", "-o", str(tmp_path / "no"), "--variant", VARIANT])
     assert code == 2
     assert capsys.readouterr().err == "inverse_design.py: error: --resolution must be at least 8, got 4\n"
-    code = inverse.main(["--kind", "hollow", "--silhouette-weight", "-1", "-o", str(tmp_path / "no"),
-                         "--variant", VARIANT])
-    assert code == 2
-    assert capsys.readouterr().err == "inverse_design.py: error: --silhouette-weight must be >= 0, got -1\n"
-    code = inverse.main(["--kind", "hollow", "--uphill", "nan", "-o", str(tmp_path / "no"),
-                         "--variant", VARIANT])
-    assert code == 2
-    assert capsys.readouterr().err == "inverse_design.py: error: --uphill must be finite, got nan\n"
-    code = inverse.main(["--kind", "hollow", "--axis-slope", "inf", "-o", str(tmp_path / "no"),
-                         "--variant", VARIANT])
-    assert code == 2
-    assert capsys.readouterr().err == "inverse_design.py: error: --axis-slope must be finite, got inf\n"
-    code = inverse.main(["--kind", "hollow", "--refine-steps", "-2", "-o", str(tmp_path / "no"),
-                         "--variant", VARIANT])
-    assert code == 2
-    assert capsys.readouterr().err == "inverse_design.py: error: --refine-steps must be at least 0, got -2\n"
+    for option, value, message in (("--silhouette-weight", "-1", "must be >= 0, got -1"),
+                                   ("--uphill", "nan", "must be finite, got nan"),
+                                   ("--axis-slope", "inf", "must be finite, got inf"),
+                                   ("--refine-steps", "-2", "must be at least 0, got -2")):
+        code = inverse.main(["--kind", "hollow", option, value, "-o", str(tmp_path / "no"),
+                             "--variant", VARIANT])
+        assert code == 2
+        assert capsys.readouterr().err == f"inverse_design.py: error: {option} {message}\n"
     for bad in ("1.5", "0", "nan"):
         code = inverse.main(["--kind", "hollow", "--starts", "0.4", bad, "-o", str(tmp_path / "no"),
                              "--variant", VARIANT])
