@@ -146,7 +146,9 @@ class LathePathIntegrator(ExactLatheSamplingIntegrator):
          path tracing cannot find, appear only with it. Needs an RGB variant,
          a ``perspective`` sensor and a film that is not a special one
          (``hdrfilm``, not ``specfilm``); ignored (path tracing alone) with
-         ``hide_emitters``. (Default: true)
+         ``hide_emitters``. They cost 1.16-1.26x plain path tracing's
+         time per sample at 256 spp (more at fewer spp): where the scene's
+         visible caustic is small, false is faster. (Default: true)
 
      * - caustic_paths
        - |float|

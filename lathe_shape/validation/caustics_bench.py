@@ -11,13 +11,19 @@ reference on three regions:
 * the **caustic region**: pixels seen directly on a surface that is not a
   lathe, where the caustic paths (light -> glass -> surface, traced from the
   light alone) carry at least 10% of the reference;
-* the **glass pixels**: pixels whose camera ray first meets a lathe;
+* the **glass pixels**: pixels whose camera ray first meets a lathe, and
+  two parts of them: those where the caustic paths (light -> glass ->
+  surface, seen through the glass along a solved camera chain) carry at
+  least 10% of the reference (``glass_caustic``), and the others
+  (``glass_other``: no caustic seen there; the caustic renders can only
+  match plain's error there, at their cost per sample);
 * the **whole image**.
 
 Printed: the error and time of each run; the time the caustic renders need to
 reach plain ``lathe_path``'s error at ``--target-spp`` in the caustic region
 (interpolated with error ~ 1/sqrt(time) from the nearest measured run) as a
-fraction of plain's time; the same on the glass pixels; and, with
+fraction of plain's time, with its lowest and highest over the rounds (each
+round's own runs); the same on the other regions; and, with
 ``--unbiased SPP``, the mean of a caustic render at that spp against the
 reference on each region; and the camera-chain solver's success rate
 (:func:`chain_solve_rate`).
@@ -178,13 +184,18 @@ def luminance(image: np.ndarray) -> np.ndarray:
     return np.asarray(image, dtype=np.float64)[..., :3].mean(axis=-1)
 
 
+#: The regions, in the order they are printed.
+REGION_NAMES = ("caustic", "glass", "glass_caustic", "glass_other", "image")
+
+
 def regions(scene: mi.Scene, reference: np.ndarray, share: float = 0.1) -> dict[str, np.ndarray]:
-    """The three regions (see the module) as (H, W) bool masks."""
+    """The regions (see the module) as (H, W) bool masks."""
     glass = glass_mask(scene)
     caustic = luminance(caustic_image(scene, 64))
     ref = luminance(reference)
-    return {"caustic": ~glass & (caustic >= share * np.maximum(ref, 1e-12)) & (ref > 0.0),
-            "glass": glass, "image": np.ones_like(glass)}
+    shows = (caustic >= share * np.maximum(ref, 1e-12)) & (ref > 0.0)
+    return {"caustic": ~glass & shows, "glass": glass, "glass_caustic": glass & shows,
+            "glass_other": glass & ~shows, "image": np.ones_like(glass)}
 
 
 def rel_mae(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
@@ -222,8 +233,9 @@ def reference_image(scene: mi.Scene, name: str, resolution: int, spp: int, cache
 
 def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[int], repeats: int,
             caustic_paths: float, camera_chains: float) -> dict:
-    """{(method, spp): {"time": median s, region: mean error}} over
-    ``repeats`` interleaved rounds (after one warm-up render each)."""
+    """{(method, spp): {"time": median s, region: mean error, "rounds":
+    [{"time": s, region: error} of each round]}} over ``repeats``
+    interleaved rounds (after one warm-up render each)."""
     kind = integrator_type(scene)
     integrators = {"plain": path_integrator(False, kind=kind),
                    "caustics": path_integrator(True, caustic_paths, camera_chains, kind)}
@@ -234,12 +246,13 @@ def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[
         for spp in spp_list:
             for method, integrator in integrators.items():
                 image, seconds = timed_render(scene, integrator, spp, 1 + round_index)
-                entry = runs.setdefault((method, spp), {"times": [], **{k: [] for k in masks}})
-                entry["times"].append(seconds)
-                for region, mask in masks.items():
-                    entry[region].append(rel_mae(image, reference, mask))
-    return {key: {"time": statistics.median(v["times"]), **{k: float(np.mean(v[k])) for k in masks}}
-            for key, v in runs.items()}
+                entry = runs.setdefault((method, spp), [])
+                entry.append({"time": seconds, **{region: rel_mae(image, reference, mask)
+                                                  for region, mask in masks.items() if mask.any()}})
+    return {key: {"time": statistics.median(run["time"] for run in rounds),
+                  **{k: float(np.mean([run[k] for run in rounds])) for k in rounds[0] if k != "time"},
+                  "rounds": rounds}
+            for key, rounds in runs.items()}
 
 
 def time_to_error(results: dict, method: str, region: str, target: float) -> float:
@@ -248,6 +261,20 @@ def time_to_error(results: dict, method: str, region: str, target: float) -> flo
     runs = [(v[region], v["time"]) for (m, _), v in results.items() if m == method]
     error, seconds = min(runs, key=lambda run: abs(np.log(run[0] / target)))
     return seconds * (error / target) ** 2
+
+
+def time_ratio(results: dict, region: str, target_spp: int) -> tuple[float, float, float]:
+    """The time the caustic renders need to reach plain's error at
+    ``target_spp`` on ``region``, over plain's time: (from the medians and
+    means over the rounds, the lowest and the highest of the rounds, each
+    round's from its own runs alone)."""
+    def ratio(runs: dict) -> float:
+        plain = runs[("plain", target_spp)]
+        return time_to_error(runs, "caustics", region, plain[region]) / plain["time"]
+    count = len(results[("plain", target_spp)]["rounds"])
+    rounds = [ratio({key: value["rounds"][index] for key, value in results.items()})
+              for index in range(count)]
+    return ratio(results), min(rounds), max(rounds)
 
 
 def noise_floor(results: dict, region: str, reference_spp: int, spp: int) -> float:
@@ -316,16 +343,18 @@ def run_bench(argv: list[str] | None = None) -> int:
         spp_list = sorted(set(args.spp) | {args.target_spp})
         results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths,
                           args.caustic_camera_chains)
-        print(f"{'method':>9} {'spp':>5} {'time s':>8} {'caustic':>8} {'glass':>8} {'image':>8}")
+        names = [region for region in REGION_NAMES if sizes[region] > 0]
+        print(f"glass pixels showing a caustic (glass_caustic): {sizes['glass_caustic']} px, the others "
+              f"(glass_other): {sizes['glass_other']} px")
+        print(f"{'method':>9} {'spp':>5} {'time s':>8} " + " ".join(f"{region:>13}" for region in names))
         for (method, spp), v in sorted(results.items(), key=lambda kv: (kv[0][1], kv[0][0])):
-            errors = " ".join(f"{v[region]:>8.4f}" for region in ("caustic", "glass", "image"))
+            errors = " ".join(f"{v[region]:>13.4f}" for region in names)
             print(f"{method:>9} {spp:>5} {v['time']:>8.3f} {errors}")
         plain_target = results[("plain", args.target_spp)]
-        for region in ("caustic", "glass", "image"):
-            target = plain_target[region]
-            ratio = time_to_error(results, "caustics", region, target) / plain_target["time"]
-            print(f"{region:>8}: time to plain {args.target_spp} spp's error {target:.4f}: "
-                  f"{ratio:.3f} of plain's {plain_target['time']:.2f} s")
+        for region in names:
+            ratio, lowest, highest = time_ratio(results, region, args.target_spp)
+            print(f"{region:>13}: time to plain {args.target_spp} spp's error {plain_target[region]:.4f}: "
+                  f"{ratio:.3f} of plain's {plain_target['time']:.2f} s (rounds: {lowest:.3f}-{highest:.3f})")
         for spp in spp_list:
             print(f"cost per sample at {spp} spp: caustics/plain = "
                   f"{results[('caustics', spp)]['time'] / results[('plain', spp)]['time']:.2f}")
@@ -352,8 +381,8 @@ def run_bench(argv: list[str] | None = None) -> int:
                 integrator = path_integrator(method == "caustics", args.caustic_paths,
                                              args.caustic_camera_chains, integrator_type(scene))
                 image, _ = timed_render(scene, integrator, 16, 1)
-                errors = ", ".join(f"{region} {rel_mae(image, reference, mask):.3f}"
-                                   for region, mask in masks.items())
+                errors = ", ".join(f"{region} {rel_mae(image, reference, masks[region]):.3f}"
+                                   for region in names)
                 print(f"figure, 16 spp, {method}: {errors}")
                 frames.append(image[..., :3])
             write_png(args.figure, np.concatenate(frames, axis=1))
@@ -365,7 +394,8 @@ def run_bench(argv: list[str] | None = None) -> int:
             for index in range(passes):
                 image += np.array(mi.render(scene, integrator=integrator, spp=args.unbiased // passes,
                                             seed=200000 + index)) / passes
-            for region, mask in masks.items():
+            for region in names:
+                mask = masks[region]
                 mean, ref_mean = luminance(image)[mask].mean(), luminance(reference)[mask].mean()
                 floor = noise_floor(results, region, args.reference_spp, args.unbiased)
                 error = rel_mae(image, reference, mask)
