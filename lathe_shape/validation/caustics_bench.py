@@ -6,7 +6,7 @@ For each scene: a reference rendered by the plain integrator
 (``caustics=false``) at many samples per pixel, then plain and caustic
 renders at several sample counts, timed as medians of interleaved runs with
 warm kernels, and their relative mean absolute error (luminance) against the
-reference on three regions:
+reference on these regions:
 
 * the **caustic region**: pixels seen directly on a surface that is not a
   lathe, where the caustic paths (light -> glass -> surface, traced from the
@@ -15,8 +15,8 @@ reference on three regions:
   two parts of them: those where the caustic paths (light -> glass ->
   surface, seen through the glass along a solved camera chain) carry at
   least 10% of the reference (``glass_caustic``), and the others
-  (``glass_other``: no caustic seen there; the caustic renders can only
-  match plain's error there, at their cost per sample);
+  (``glass_other``: little or no caustic seen there, so the caustic
+  renders reach plain's error there in about their cost per sample);
 * the **whole image**.
 
 Printed: the error and time of each run; the time the caustic renders need to
@@ -44,8 +44,8 @@ import numpy as np
 from ..plugin.params import CAUSTIC_CAMERA_CHAINS, CAUSTIC_PATHS
 from .bench import square_side
 
-__all__ = ["SCENES", "bench_parser", "caustic_image", "chain_solve_rate", "glass_mask", "regions",
-           "run_bench"]
+__all__ = ["REGION_NAMES", "SCENES", "bench_parser", "caustic_image", "chain_solve_rate", "glass_mask",
+           "regions", "run_bench", "split_regions", "time_ratio"]
 
 #: The benchmark's scenes: name -> (XML path under the repository, edit of
 #: its text or None).
@@ -190,10 +190,16 @@ REGION_NAMES = ("caustic", "glass", "glass_caustic", "glass_other", "image")
 
 def regions(scene: mi.Scene, reference: np.ndarray, share: float = 0.1) -> dict[str, np.ndarray]:
     """The regions (see the module) as (H, W) bool masks."""
-    glass = glass_mask(scene)
-    caustic = luminance(caustic_image(scene, 64))
-    ref = luminance(reference)
-    shows = (caustic >= share * np.maximum(ref, 1e-12)) & (ref > 0.0)
+    return split_regions(glass_mask(scene), luminance(caustic_image(scene, 64)), luminance(reference), share)
+
+
+def split_regions(glass: np.ndarray, caustic: np.ndarray, reference: np.ndarray,
+                  share: float = 0.1) -> dict[str, np.ndarray]:
+    """The regions of :data:`REGION_NAMES` as (H, W) bool masks, from the
+    glass pixels ``glass`` (bool), the light-traced caustic's luminance
+    ``caustic`` and the reference's ``reference``: the caustic shows where
+    it carries at least ``share`` of the reference."""
+    shows = (caustic >= share * np.maximum(reference, 1e-12)) & (reference > 0.0)
     return {"caustic": ~glass & shows, "glass": glass, "glass_caustic": glass & shows,
             "glass_other": glass & ~shows, "image": np.ones_like(glass)}
 
