@@ -500,17 +500,24 @@ class _HollowLoss:
         # The scenes are made from the target (whose height places the
         # cameras), render the targets, and are given other points afterwards
         self.scene = hollow_scene(target, resolution, views, max_depth, frequency=frequency)
-        self.targets = render_views(self.scene, spp, seed)
         self.params = mi.traverse(self.scene)
         self.key = points_key(self.params, scene_lathes(self.scene)[0])
         self.written = [(self.params, self.key)]
         if silhouette_weight > 0.0:
             # The silhouettes of the same views (a user segments the photographs)
             self.mask_scene = hollow_scene(target, resolution, views, lighting="mask")
-            self.mask_targets = render_views(self.mask_scene, spp, seed)
             self.mask_params = mi.traverse(self.mask_scene)
             self.mask_key = points_key(self.mask_params, scene_lathes(self.mask_scene)[0])
             self.written.append((self.mask_params, self.mask_key))
+        self._render_targets()
+
+    def _render_targets(self) -> None:
+        """Render the targets (and their silhouettes) with the current pixel
+        samples, from the scenes as they are (holding the hidden profile)."""
+        with dr.suspend_grad():
+            self.targets = render_views(self.scene, self.spp, self.seed)
+            if self.weight > 0.0:
+                self.mask_targets = render_views(self.mask_scene, self.spp, self.seed)
 
     def write(self, points: np.ndarray, n_outer: int) -> bool:
         """Set ``points`` in every scene if they make a valid hollow profile
@@ -536,10 +543,7 @@ class _HollowLoss:
             self.seed += 1000 * len(self.scene.sensors())
             for params, key in self.written:
                 _write_points(params, key, self.target)
-            with dr.suspend_grad():
-                self.targets = render_views(self.scene, self.spp, self.seed)
-                if self.weight > 0.0:
-                    self.mask_targets = render_views(self.mask_scene, self.spp, self.seed)
+            self._render_targets()
         self.params[self.key] = points
         self.params.update()
         loss = _multiscale_loss(render_views(self.scene, self.spp, self.seed, self.params), self.targets,

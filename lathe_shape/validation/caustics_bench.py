@@ -254,7 +254,7 @@ def measure(scene: mi.Scene, reference: np.ndarray, masks: dict, spp_list: list[
                 image, seconds = timed_render(scene, integrator, spp, 1 + round_index)
                 entry = runs.setdefault((method, spp), [])
                 entry.append({"time": seconds, **{region: rel_mae(image, reference, mask)
-                                                  for region, mask in masks.items() if mask.any()}})
+                                                  for region, mask in masks.items()}})
     return {key: {"time": statistics.median(run["time"] for run in rounds),
                   **{k: float(np.mean([run[k] for run in rounds])) for k in rounds[0] if k != "time"},
                   "rounds": rounds}
@@ -344,12 +344,14 @@ def run_bench(argv: list[str] | None = None) -> int:
         reference = reference_image(scene, name, args.resolution, args.reference_spp, args.cache)
         masks = regions(scene, reference)
         sizes = {region: int(mask.sum()) for region, mask in masks.items()}
+        # (a region without pixels, such as glass that shows no caustic, has no error)
+        masks = {region: mask for region, mask in masks.items() if sizes[region] > 0}
+        names = [region for region in REGION_NAMES if region in masks]
         print(f"\n== {name} ({integrator_type(scene)}): caustic region {sizes['caustic']} px, "
               f"glass {sizes['glass']} px")
         spp_list = sorted(set(args.spp) | {args.target_spp})
         results = measure(scene, reference, masks, spp_list, args.repeats, args.caustic_paths,
                           args.caustic_camera_chains)
-        names = [region for region in REGION_NAMES if sizes[region] > 0]
         print(f"glass pixels showing a caustic (glass_caustic): {sizes['glass_caustic']} px, the others "
               f"(glass_other): {sizes['glass_other']} px")
         print(f"{'method':>9} {'spp':>5} {'time s':>8} " + " ".join(f"{region:>13}" for region in names))
