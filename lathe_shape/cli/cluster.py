@@ -22,7 +22,6 @@ import argparse
 import copy
 import functools
 import os
-import sys
 import time
 from typing import TYPE_CHECKING
 
@@ -196,7 +195,7 @@ def render_job_on_cluster(job: Job, prog: str) -> int:
         progress.close()
         if not is_interrupt(e):
             raise
-        print(interrupted(), file=sys.stderr)
+        interrupts.print_message(interrupted())
         return 130
     progress.close()
     print_turn_summary(progress.rendered, len(frames), job.out_dir, start)

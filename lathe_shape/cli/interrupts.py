@@ -63,7 +63,9 @@ __all__ = [
     "installed",
     "message",
     "on_interrupt",
+    "print_message",
     "set_prog",
+    "stopping",
     "watch_folder",
     "writing",
 ]
@@ -105,6 +107,19 @@ def install(prog: str) -> None:
 def installed() -> bool:
     """Whether this process's Ctrl-C is the watcher's."""
     return _watcher is not None
+
+
+def stopping() -> bool:
+    """Whether the watcher has taken a Ctrl-C and is ending the process (it
+    prints the command's message: the command must not print its own)."""
+    return _stopping
+
+
+def print_message(text: str) -> None:
+    """Print a command's Ctrl-C message on stderr, unless the watcher is
+    ending the process: it prints the message itself (:func:`message`)."""
+    if not _stopping:
+        print(text, file=sys.stderr)
 
 
 def set_prog(prog: str) -> None:
@@ -277,9 +292,9 @@ def _end_children() -> None:
             time.sleep(0.005)
 
 
-def _write_message() -> None:
+def _write_message(make: Callable[[], str] | None) -> None:
     try:
-        text = _message() if _message is not None else f"{_prog}: interrupted"
+        text = make() if make is not None else f"{_prog}: interrupted"
     except Exception:
         text = f"{_prog}: interrupted"
     # Straight to the file descriptor: a flush could wait for a pipe that
@@ -295,6 +310,9 @@ def _stop() -> None:
     """What a Ctrl-C does in a command process (see the module docstring)."""
     global _stopping
     deadline = time.monotonic() + GRACE_SECONDS
+    # The message of the block running when the Ctrl-C came: the command's
+    # threads may leave that block (a write refused below) before it is printed.
+    make_message = _message
     _exit_lock.acquire()  # (kept: the command's own exit() no longer happens)
     with _state:
         _stopping = True
@@ -305,7 +323,7 @@ def _stop() -> None:
     _end_children()
     _run_cleanups(_cleanups)
     _remove_temporary_files()
-    _write_message()
+    _write_message(make_message)
     os._exit(130)
 
 

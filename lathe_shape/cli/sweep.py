@@ -309,7 +309,7 @@ def _sweep_into(args: argparse.Namespace, renders: list, specs: list, out_dir: s
         progress.close()
         if not is_interrupt(e):
             raise
-        print(interrupted(), file=sys.stderr)
+        interrupts.print_message(interrupted())
         return 130
     progress.close()
     print(f"  wrote {len(done)} render(s) and {INDEX} in {time.perf_counter() - start:.2f} s; "

@@ -482,7 +482,7 @@ def render_job(job: Job) -> int:
         progress.close()  # end the bar's line before any message
         if not is_interrupt(e):
             raise
-        print(interrupted(), file=sys.stderr)
+        interrupts.print_message(interrupted())
         return 130
     finally:
         if job.args.threads is not None:

@@ -347,3 +347,39 @@ def test_compare_reads_max_depth_of_our_integrators(tmp_path, capsys):
         assert compare._integrator_max_depth(integrator) in ((depth,) if depth >= 0 else (-1, 2**32 - 1))
         assert compare._integrator_max_depth(mi.load_dict({"type": "path", "max_depth": depth})) \
             in ((depth,) if depth >= 0 else (-1, 2**32 - 1))
+
+
+#: A command's last moments after a Ctrl-C: a frame write is in flight, so the
+#: watcher waits for it, and meanwhile the command's main thread, whose next
+#: write is refused, leaves its message block and tries to print its own line.
+_LEAVES_ITS_BLOCK = """
+import os, signal, sys, threading, time
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # (before Mitsuba's threads start)
+from lathe_shape.cli import interrupts
+interrupts.install("lathe-x")
+started = threading.Event()
+
+def write():
+    with interrupts.writing():
+        started.set()
+        time.sleep(0.2)
+
+threading.Thread(target=write).start()
+started.wait()
+with interrupts.message(lambda: "lathe-x: interrupted after 3 frames; run it again"):
+    os.kill(os.getpid(), signal.SIGINT)
+    while not interrupts.stopping():
+        time.sleep(0.001)
+interrupts.print_message("lathe-x: the main thread's line")
+time.sleep(5)
+"""
+
+
+def test_ctrl_c_message_is_the_one_of_the_block_it_came_in():
+    """The turntable's resume hint was lost when its main thread left the
+    message block before the watcher printed (seen once in CI): the watcher
+    prints the message of the block the Ctrl-C came in, and only it prints."""
+    proc = subprocess.run([sys.executable, "-c", _LEAVES_ITS_BLOCK], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr == "lathe-x: interrupted after 3 frames; run it again\n"
