@@ -191,8 +191,7 @@ def _report(prog: str, error: BaseException) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
     try:  # (a second Ctrl-C meanwhile is ignored, so that it gives no traceback)
-        if not interrupts.stopping():  # (else the Ctrl-C watcher prints it)
-            print(f"{prog}: interrupted", file=sys.stderr)
+        interrupts.print_message(f"{prog}: interrupted")
     finally:
         if main_thread and _all_work_done():  # the process goes on: main() was called in-process
             signal.signal(signal.SIGINT, handler)

@@ -28,8 +28,10 @@ fraction of a second whatever the other threads do:
   folders of unfinished files, the turntable's folder lock) and removes
   the process's temporary files in the output folders
   (:func:`watch_folder`);
-* prints the command's one-line message and ends the process with status
-  130 (``os._exit``: a running kernel cannot be cancelled).
+* prints the command's one-line message (:func:`message`: that of the block
+  the Ctrl-C came in, even if the command's threads have left it since; the
+  command itself prints none, :func:`print_message`) and ends the process
+  with status 130 (``os._exit``: a running kernel cannot be cancelled).
 
 Files are written in a hidden staging folder inside the output folder
 (:class:`Staging`) and moved into place by :func:`commit`. The watcher
